@@ -1,0 +1,98 @@
+"""Closed-loop benchmark: the daemon driving the simulated dome (issue 5 targets).
+
+Runs `ptzd sim` (virtual clock, real Pelco bytes over a pty) on synthetic scenes and on the
+annotated vtest.avi pedestrians in bench/annotations (needs data/vtest.avi:
+./scripts/fetch-vtest.sh), prints a table and writes bench/results/closed_loop.json.
+
+Targets: centred (central cell of the 3x3 grid) >= 95 % of frames, in view 100 %,
+frame-to-command latency p99 <= 40 ms, at most one zoom reversal per 10 s. Latency is wall
+time from a frame being rendered to its command being written (tracker included); this
+machine is shared, so latency numbers are noisy.
+
+    .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+from ptzd.closed_loop import ClosedLoopOptions, run_closed_loop
+from ptzd.config import validate_config
+
+ROOT = Path(__file__).resolve().parents[1]
+VTEST = ROOT / "data" / "vtest.avi"
+
+
+def cases(seeds: list[int]) -> list[tuple[str, str, str | None, int | None]]:
+    out: list[tuple[str, str, str | None, int | None]] = [
+        (f"synthetic:{s}", f"synthetic:{s}", None, None) for s in seeds
+    ]
+    if VTEST.exists():
+        for gt in sorted((ROOT / "bench" / "annotations").glob("vtest_*.json")):
+            doc = json.loads(gt.read_text())
+            for track in doc["tracks"]:
+                out.append((f"vtest#{track['id']}", str(VTEST), str(gt), int(track["id"])))
+    return out
+
+
+async def run_case(spec: str, gt: str | None, target: int | None, duration: float,
+                   record: Path | None) -> dict[str, Any]:  # fmt: skip
+    options = ClosedLoopOptions(
+        config=validate_config({}, environ={}),
+        spec=spec,
+        is_video=gt is not None,
+        gt_path=gt,
+        target=target,
+        duration=duration,
+        record=record,
+        virtual=True,
+    )
+    return await run_closed_loop(options)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2])
+    parser.add_argument("--duration", type=float, default=30.0)
+    parser.add_argument("--record", type=Path, help="keep each run's records under this dir")
+    args = parser.parse_args()
+    rows = []
+    for name, spec, gt, target in cases(args.seeds):
+        record = args.record / name.replace(":", "_").replace("#", "_") if args.record else None
+        report = asyncio.run(run_case(spec, gt, target, args.duration, record))
+        latency = report["latency_ms"]
+        rows.append(
+            {
+                "case": name,
+                "frames": report["frames_scored"],
+                "centred": report["centred_fraction"],
+                "in_view": report["in_view_fraction"],
+                "size_err_median": report["size_error_median"],
+                "latency_p50_ms": latency["p50_ms"],
+                "latency_p99_ms": latency["p99_ms"],
+                "reversals": report["zoom_reversals"],
+                "max_reversals_per_10s": report["max_reversals_per_10s"],
+                "dropped": report["frames_dropped"],
+            }
+        )
+    header = f"{'case':<14}{'frames':>7}{'centred':>9}{'in view':>9}{'size err':>9}"
+    header += f"{'p50 ms':>8}{'p99 ms':>8}{'rev':>5}{'rev/10s':>8}"
+    print(header)
+    for r in rows:
+        print(
+            f"{r['case']:<14}{r['frames']:>7}{r['centred']:>9.3f}{r['in_view']:>9.3f}"
+            f"{(r['size_err_median'] or 0):>9.3f}{r['latency_p50_ms']:>8.1f}"
+            f"{r['latency_p99_ms']:>8.1f}{r['reversals']:>5}{r['max_reversals_per_10s']:>8}"
+        )
+    out = ROOT / "bench" / "results" / "closed_loop.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"duration_s": args.duration, "rows": rows}, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

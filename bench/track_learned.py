@@ -1,0 +1,262 @@
+"""The learned likelihoods (`rf`, Ko 2013; `svm`, Sun 2015) against `color` and OpenCV peers.
+
+    .venv/bin/python -m bench.track_learned --quick        # ptzd trackers only
+    .venv-bench/bin/python -m bench.track_learned          # with CSRT/KCF/MIL
+
+A companion of bench/track.py (same sequences, scoring and table), kept separate so the two
+can change independently. Adds:
+- `synthetic-thermal`: the simulator's thermal rendering (`synthetic-thermal:SEED`, grey),
+  fed to the trackers as single-channel HxW frames (the peers get it replicated to BGR);
+- `rf-static`: the RF learned once on the first frame (Ko 2013 sec. 5.4 ablation);
+- a speed section: `rf` at 320x240 with N = 120 and `svm` at 640x480 (the issue's targets),
+  `color` at both sizes, on vtest frames resized, pinned to one core, median of repeats.
+
+Writes bench/results/track_learned.json. The machine is shared (2 cores, other work
+running): frame rates are noisy; compare the trackers of one run.
+"""
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bench.track import (  # noqa: E402
+    ANNOTATIONS,
+    PEERS,
+    RESULTS,
+    VTEST,
+    BenchTracker,
+    Frame,
+    Matrix,
+    OpenCVTracker,
+    Sequence,
+    opencv_tracker_factory,
+    print_table,
+    run_tracker,
+    synthetic_sequences,
+    vtest_sequences,
+)
+from ptzd.metrics import Box  # noqa: E402
+from ptzd.sim.groundtruth import load_ground_truth  # noqa: E402
+from ptzd.vision.config import RfConfig, TrackerConfig  # noqa: E402
+
+LEARNED_CLASSES = ("vtest", "synthetic-static", "synthetic-thermal")
+DEFAULT = ("color", "rf", "rf-static", "svm")
+
+
+class ConfigTracker:
+    """A ptzd tracker built from a TrackerConfig; LOST counts as null."""
+
+    def __init__(self, name: str, config: TrackerConfig) -> None:
+        self.name = name
+        self.config = config
+        self._tracker: Any = None
+
+    def init(self, frame: Frame, box: Box) -> None:
+        from ptzd.vision.tracking import make_tracker
+
+        self._tracker = make_tracker(self.config)
+        self._tracker.init(self._input(frame), box)
+
+    def _input(self, frame: Frame) -> Frame:
+        # the colour likelihood needs BGR; rf and svm take grey frames as they are
+        return _bgr(frame) if self.config.kind == "color" else frame
+
+    def update(self, frame: Frame, ego: Matrix | None) -> Box | None:
+        from ptzd.vision.tracking import TrackState
+
+        result = self._tracker.update(self._input(frame), ego)
+        if result.state is TrackState.LOST:
+            return None
+        box: Box = result.box
+        return box
+
+
+class BgrPeer(OpenCVTracker):
+    """An OpenCV peer that accepts grey frames (replicated to BGR)."""
+
+    def init(self, frame: Frame, box: Box) -> None:
+        super().init(_bgr(frame), box)
+
+    def update(self, frame: Frame, ego: Matrix | None) -> Box | None:
+        return super().update(_bgr(frame), ego)
+
+
+def _bgr(frame: Frame) -> Frame:
+    return (
+        frame if frame.ndim == 3 else np.asarray(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR), np.uint8)
+    )
+
+
+def make(name: str, seed: int) -> BenchTracker:
+    if name in ("color", "rf", "svm"):
+        return ConfigTracker(name, TrackerConfig(kind=name, seed=seed))
+    if name == "rf-static":
+        return ConfigTracker(name, TrackerConfig(kind="rf", seed=seed, rf=RfConfig(online=False)))
+    if name in PEERS:
+        return BgrPeer(name)
+    raise SystemExit(f"unknown tracker {name!r}: choose from {', '.join(DEFAULT + PEERS)}")
+
+
+def thermal_sequences(seeds: list[int], max_frames: int, targets: int) -> Iterator[Sequence]:
+    """Single-channel frames of `synthetic-thermal:SEED`, one sequence per target."""
+    from ptzd.sim.sources import open_wide_source
+
+    for seed in seeds:
+        source = open_wide_source(f"synthetic-thermal:{seed}")
+        gt = source.ground_truth
+        if gt is None:
+            continue
+        frames = [
+            np.asarray(cv2.cvtColor(source.read(i), cv2.COLOR_BGR2GRAY), np.uint8)
+            for i in range(max_frames)
+        ]
+        for tid in sorted(gt.boxes_at(0))[:targets]:
+            truth = {i: b for i in range(max_frames) if (b := gt.boxes_at(i).get(tid)) is not None}
+            yield Sequence(f"thermal{seed}-t{tid}", "synthetic-thermal", frames, truth)
+
+
+def speed(frames: list[Frame], init: Box, size: tuple[int, int], names: list[str], repeats: int,
+          seed: int) -> dict[str, float]:  # fmt: skip
+    """Median tracked frames/s per tracker on `frames` resized to `size`."""
+    sx, sy = size[0] / frames[0].shape[1], size[1] / frames[0].shape[0]
+    small = [
+        np.asarray(cv2.resize(f, size, interpolation=cv2.INTER_AREA), np.uint8) for f in frames
+    ]
+    box = (init[0] * sx, init[1] * sy, init[2] * sx, init[3] * sy)
+    out: dict[str, float] = {}
+    for name in names:
+        rates = []
+        for _ in range(repeats):
+            tracker = make(name, seed)
+            tracker.init(small[0], box)
+            t0 = time.perf_counter()
+            for f in small[1:]:
+                tracker.update(f, None)
+            rates.append((len(small) - 1) / (time.perf_counter() - t0))
+        out[name] = statistics.median(rates)
+        print(f"  {name:<10} {size[0]}x{size[1]} {out[name]:8.1f} frames/s", flush=True)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.track_learned")
+    parser.add_argument("--trackers", default=",".join(DEFAULT))
+    parser.add_argument("--classes", default=",".join(LEARNED_CLASSES))
+    parser.add_argument("--seeds", default="1,2")
+    parser.add_argument("--targets-per-seed", type=int, default=2)
+    parser.add_argument("--max-frames", type=int, default=300)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-speed", action="store_true")
+    parser.add_argument("--quick", action="store_true", help="seed 1, one target, 100 frames")
+    parser.add_argument("--out", type=Path, default=RESULTS / "track_learned.json")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.targets_per_seed, args.max_frames, args.repeats = "1", 1, 100, 1
+    names = [t for t in args.trackers.split(",") if t]
+    classes = {c for c in args.classes.split(",") if c}
+    for name in names:
+        if name in PEERS:
+            try:
+                opencv_tracker_factory(name)
+            except LookupError as exc:
+                raise SystemExit(str(exc)) from None
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+        cv2.setNumThreads(1)
+    seeds = [int(s) for s in args.seeds.split(",")]
+    sources: list[Iterator[Sequence]] = []
+    if "vtest" in classes:
+        sources.append(vtest_sequences(args.max_frames, None))
+    if "synthetic-static" in classes:
+        sources.append(
+            synthetic_sequences(
+                seeds, {"synthetic-static"}, args.max_frames, args.targets_per_seed, 90.0
+            )
+        )
+    if "synthetic-thermal" in classes:
+        sources.append(thermal_sequences(seeds, args.max_frames, args.targets_per_seed))
+    results: list[dict[str, Any]] = []
+    for source in sources:
+        for seq in source:
+            if 0 not in seq.truth:
+                continue
+            entry: dict[str, Any] = {
+                "name": seq.name,
+                "class": seq.cls,
+                "frames": len(seq.frames),
+                "trackers": {},
+            }
+            line = f"{seq.cls:<17} {seq.name:<24} {len(seq.frames):4d} frames:"
+            for name in names:
+                run = run_tracker(make(name, args.seed), seq)
+                entry["trackers"][name] = {**run.score.to_json(), "fps": run.fps}
+                line += f"  {name} {run.score.auc:.3f}/{run.fps:.0f}fps"
+            print(line, flush=True)
+            results.append(entry)
+    summary = _summarise(results, names)
+    if results:
+        print_table(results, summary, names)
+    fps: dict[str, Any] = {}
+    if not args.no_speed and VTEST.is_file():
+        from ptzd.sim.sources import open_wide_source
+
+        gt = load_ground_truth(ANNOTATIONS / "vtest_2.json")
+        boxes = next(iter(gt.tracks.values()))
+        first = min(boxes)
+        video = open_wide_source(str(VTEST))
+        frames = [video.read(i) for i in range(first, first + (60 if args.quick else 146))]
+        print(f"\nspeed: {len(frames) - 1} vtest frames resized, median of {args.repeats}, "
+              "one core")  # fmt: skip
+        fps["320x240"] = speed(frames, boxes[first], (320, 240), ["color", "rf"], args.repeats,
+                               args.seed)  # fmt: skip
+        fps["640x480"] = speed(frames, boxes[first], (640, 480), ["color", "svm"], args.repeats,
+                               args.seed)  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "note": "shared 2-core machine: frame rates are noisy; compare trackers of one run",
+        "argv": sys.argv[1:] if argv is None else argv,
+        "sequences": results,
+        "classes": summary,
+        "speed": fps,
+    }
+    args.out.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _summarise(results: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
+    summary: dict[str, Any] = {}
+    for cls in LEARNED_CLASSES:
+        rows = [r for r in results if r["class"] == cls]
+        if not rows:
+            continue
+        summary[cls] = {}
+        for name in names:
+            runs = [r["trackers"][name] for r in rows if name in r["trackers"]]
+            summary[cls][name] = {
+                "sequences": len(runs),
+                "auc": statistics.fmean(run["auc"] for run in runs),
+                "precision_20": statistics.fmean(run["precision_20"] for run in runs),
+                "lost_frames": sum(run["lost_frames"] for run in runs),
+                "frames": sum(run["frames"] for run in runs),
+                "median_fps": statistics.median(run["fps"] for run in runs),
+            }
+    return summary
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,7 @@
+"""`python -m ptzd` is the same as the `ptzd` console script."""
+
+import sys
+
+from ptzd.cli import main
+
+sys.exit(main())

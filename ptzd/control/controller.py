@@ -1,0 +1,222 @@
+"""`PtzController`: track in, Pelco command out. Pure; time is passed in.
+
+Per update:
+1. A missing or stale track (older than `max_track_age_s`) stops the dome.
+2. LOST starts the lost policy: stop, hold `lost.hold_s`, then go to `lost.home_preset` once.
+   OCCLUDED holds still (the tracker coasts; chasing a guess moves the camera off the scene).
+3. TRACKING: the target is predicted forward by its age plus `lead_s` (latency compensation);
+   its offset from the centre, normalised to the half frame, picks one of nine regions
+   (hysteretic stop region); outside the stop band each axis runs its PID on the offset in
+   pixels of a `reference_width` frame and maps C_out to the seed's speed (eqs. 28-31).
+4. Beyond the seed, that speed is read as a fraction of a linear dome's range
+   (`linear_max_deg_s` at full speed), scaled by the current FOV over `reference_hfov` (a pixel
+   is a smaller angle when zoomed in), and turned into the real dome's speed byte through its
+   speed curve (`DomeModelConfig`), so the loop behaves alike on linear and exponential domes
+   and at every zoom.
+5. Zoom: `ZoomController` decides steps; a step is a zoom pulse long enough to scale the image
+   by the step's factor at the dome's zoom rate (`zoom.log_rate`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ptzd.control.config import AxisConfig, ControlConfig
+from ptzd.control.egomotion import byte_for_rate
+from ptzd.control.pid import Pid, PidGains, output_limit_for, pelco_speed
+from ptzd.control.regions import NineRegionFov, Region
+from ptzd.control.zoom import Box, ZoomController, ZoomDirection, ZoomStep
+from ptzd.pelco.codec import MAX_SPEED as PELCO_MAX_SPEED
+from ptzd.pelco.codec import STOP, Motion, Preset, PresetAction, Zoom
+from ptzd.vision.tracking import TrackState
+
+__all__ = ["STOP", "ControlDecision", "PtzController", "TrackInput"]
+
+
+@dataclass(frozen=True)
+class TrackInput:
+    """What the controller needs from one tracker result (view pixels, seconds)."""
+
+    box: Box
+    velocity: tuple[float, float]  # px/s in the view
+    state: TrackState
+    confidence: float
+    capture_time: float
+
+
+@dataclass(frozen=True)
+class ControlDecision:
+    """The command to be in force now, plus what led to it."""
+
+    motion: Motion
+    mode: str  # idle | stale | track | coast | hold | lost | home
+    preset: Preset | None = None
+    zoom_step: ZoomStep | None = None
+    region: Region | None = None
+    track_time: float | None = None  # capture time of the track acted on
+    predicted: tuple[float, float] | None = None
+
+
+def _make_pid(cfg: AxisConfig) -> Pid:
+    return Pid(
+        PidGains(cfg.kp, cfg.ki, cfg.kd),
+        # with offset == max_speed any output saturates; keep a tiny positive limit
+        output_limit=max(output_limit_for(cfg.offset, cfg.max_speed), 1e-6),
+        integral_limit=cfg.integral_limit,
+        derivative_tau_s=cfg.derivative_tau_s,
+    )
+
+
+class PtzController:
+    """Pan/tilt PIDs, nine-region FOV, zoom layers and the target-lost policy together."""
+
+    def __init__(self, config: ControlConfig, frame_size: tuple[int, int]) -> None:
+        self.config = config
+        self.frame_size = frame_size
+        self.pan_pid = _make_pid(config.pan)
+        self.tilt_pid = _make_pid(config.tilt)
+        self.regions = NineRegionFov(config.regions.stop_enter, config.regions.stop_leave)
+        self.zoom = ZoomController(config.zoom)
+        self._last_time: float | None = None
+        self._zoom_until = -math.inf
+        self._zoom_direction = Zoom.NONE
+        self._lost_since: float | None = None
+        self._went_home = False
+
+    @property
+    def zoom_layer(self) -> int:
+        return self.zoom.layer
+
+    def acquire(self, box: Box) -> None:
+        """A new target: its box sets the desired size; the loop starts from rest."""
+        self.zoom.set_desired_from_box(box, self.frame_size[1])
+        self._rest()
+        self._lost_since = None
+        self._went_home = False
+
+    def _rest(self) -> None:
+        self.pan_pid.reset()
+        self.tilt_pid.reset()
+        self.regions.reset()
+        self.zoom.reset_guards()
+        self._zoom_until = -math.inf
+        self._zoom_direction = Zoom.NONE
+
+    def gain_scale(self, hfov: float) -> float:
+        """Angular-rate scale for the current FOV, within [min_gain_scale, 1]."""
+        cfg = self.config
+        return max(cfg.min_gain_scale, min(1.0, hfov / cfg.reference_hfov))
+
+    def update(self, track: TrackInput | None, now: float, hfov: float) -> ControlDecision:
+        """The command for time `now` given the latest track and the current horizontal FOV."""
+        dt = 0.0 if self._last_time is None else max(0.0, now - self._last_time)
+        self._last_time = now
+        cfg = self.config
+        if track is None:
+            self._rest()
+            return ControlDecision(STOP, "idle")
+        if now - track.capture_time > cfg.max_track_age_s:
+            self._rest()
+            return ControlDecision(STOP, "stale", track_time=track.capture_time)
+        if track.state == TrackState.LOST:
+            return self._lost(now, track.capture_time)
+        self._lost_since = None
+        self._went_home = False
+        if track.state == TrackState.OCCLUDED:
+            if not cfg.lost.follow_occluded:
+                self._rest()
+                return ControlDecision(STOP, "hold", track_time=track.capture_time)
+            # follow the tracker's coasting prediction; never zoom on a guess
+            return self._track(track, now, dt, hfov, zoom=False, mode="coast")
+        return self._track(track, now, dt, hfov)
+
+    def _lost(self, now: float, track_time: float) -> ControlDecision:
+        self._rest()
+        if self._lost_since is None:
+            self._lost_since = now
+        home = self.config.lost.home_preset
+        if home and not self._went_home and now - self._lost_since >= self.config.lost.hold_s:
+            self._went_home = True
+            self.zoom.layer = 0
+            return ControlDecision(
+                STOP, "home", preset=Preset(PresetAction.GOTO, home), track_time=track_time
+            )
+        return ControlDecision(STOP, "lost", track_time=track_time)
+
+    def _track(
+        self,
+        track: TrackInput,
+        now: float,
+        dt: float,
+        hfov: float,
+        *,
+        zoom: bool = True,
+        mode: str = "track",
+    ) -> ControlDecision:
+        cfg = self.config
+        width, height = self.frame_size
+        lead = max(0.0, now - track.capture_time) + cfg.lead_s
+        vx, vy = track.velocity
+        box = track.box
+        cx, cy = box.cx + vx * lead, box.cy + vy * lead
+        ex = (cx - width / 2) / (width / 2)
+        ey = (cy - height / 2) / (height / 2)
+        region = self.regions.update(ex, ey)
+        to_reference = cfg.reference_width / width
+        scale = self.gain_scale(hfov)
+        pan = self._axis_speed(
+            region.column, (cx - width / 2) * to_reference, dt, scale, tilt=False
+        )
+        # image y grows downwards, tilt + is up: a target below the centre needs tilt < 0
+        tilt = -self._axis_speed(region.row, (cy - height / 2) * to_reference, dt, scale, tilt=True)
+
+        step: ZoomStep | None = None
+        if not zoom:
+            self._zoom_until = -math.inf
+            self._zoom_direction = Zoom.NONE
+            self.zoom.reset_guards()
+        elif now >= self._zoom_until:
+            self._zoom_direction = Zoom.NONE
+            speed = math.hypot(vx, vy) / width
+            predicted_box = Box(box.x + vx * lead, box.y + vy * lead, box.w, box.h)
+            dome = cfg.dome
+            step = self.zoom.update(
+                predicted_box,
+                self.frame_size,
+                speed,
+                now,
+                can_in=hfov > dome.hfov_tele * 1.01,
+                can_out=hfov < dome.hfov_wide * 0.99,
+            )
+            if step is not None:
+                duration = abs(math.log(step.factor)) / cfg.zoom.log_rate
+                duration = min(cfg.zoom.max_step_s, max(cfg.zoom.min_step_s, duration))
+                self._zoom_until = now + duration
+                self._zoom_direction = Zoom.IN if step.direction == ZoomDirection.IN else Zoom.OUT
+        motion = Motion(pan=pan, tilt=tilt, zoom=self._zoom_direction)
+        return ControlDecision(
+            motion,
+            mode,
+            zoom_step=step,
+            region=region,
+            track_time=track.capture_time,
+            predicted=(cx, cy),
+        )
+
+    def _axis_speed(
+        self, zone: int, error_px: float, dt: float, scale: float, *, tilt: bool
+    ) -> int:
+        axis_cfg = self.config.tilt if tilt else self.config.pan
+        pid = self.tilt_pid if tilt else self.pan_pid
+        if zone == 0:
+            pid.reset()
+            return 0
+        c_out = pid.update(error_px, dt)
+        seed_speed = pelco_speed(c_out, offset=axis_cfg.offset, max_speed=axis_cfg.max_speed)
+        if seed_speed == 0 or (seed_speed > 0) != (zone > 0):
+            # The PID (through its derivative) may briefly oppose the region's direction;
+            # the region decides the direction, so that reads as "not yet": stand still.
+            return 0
+        rate = seed_speed / PELCO_MAX_SPEED * self.config.linear_max_deg_s * scale
+        return byte_for_rate(rate, self.config.dome, max_speed=axis_cfg.max_speed)

@@ -1,0 +1,1 @@
+"""MQTT: track state out, commands in, availability by last will."""

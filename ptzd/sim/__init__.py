@@ -1,0 +1,1 @@
+"""The simulated PTZ dome: a wide video warped by a rotation-only camera model."""

@@ -1,0 +1,104 @@
+"""MJPEG over HTTP (multipart/x-mixed-replace), the way cheap IP cameras stream.
+
+`cv2.VideoCapture("http://HOST:PORT/video.mjpg")` opens it. Every part carries the frame's
+capture time in an `X-Timestamp` header (seconds on the simulator's clock: CLOCK_MONOTONIC
+under the real clock, comparable with `time.monotonic()` of any process on the same host) and
+its frame number in `X-Frame`. Each client gets the newest frame when it is ready for one: a
+slow client skips frames and never makes the camera or other clients wait.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+import cv2
+
+from ptzd.logs import get_logger
+from ptzd.sim.camera import SimFrame
+
+BOUNDARY = "ptzdframe"
+STREAM_PATHS = ("/", "/video.mjpg", "/video")
+
+_log = get_logger("sim.mjpeg")
+
+
+class MjpegServer:
+    """Streams the frames given to `publish` to every connected HTTP client."""
+
+    def __init__(self, host: str, port: int, *, quality: int = 85) -> None:
+        self._host = host
+        self._port = port
+        self._quality = quality
+        self._server: asyncio.Server | None = None
+        self._clients = 0
+        self._part: bytes | None = None
+        self._new_part = asyncio.Event()
+        self.url = ""
+        self.frames_encoded = 0
+
+    async def start(self) -> str:
+        """Listen; returns the stream URL (with the real port when 0 was asked for)."""
+        self._server = await asyncio.start_server(self._serve, self._host, self._port)
+        host, port = self._server.sockets[0].getsockname()[:2]
+        self.url = f"http://{host}:{port}/video.mjpg"
+        _log.info("mjpeg_listen", url=self.url)
+        return self.url
+
+    def publish(self, frame: SimFrame) -> None:
+        """Encode `frame` once (only if someone is watching) and wake every client."""
+        if not self._clients:
+            return
+        ok, jpeg = cv2.imencode(".jpg", frame.image, [cv2.IMWRITE_JPEG_QUALITY, self._quality])
+        if not ok:
+            _log.warning("jpeg_encode_failed", frame=frame.index)
+            return
+        self.frames_encoded += 1
+        data = jpeg.tobytes()
+        header = (
+            f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(data)}\r\n"
+            f"X-Timestamp: {frame.t:.6f}\r\nX-Frame: {frame.index}\r\n\r\n"
+        ).encode()
+        self._part = header + data + b"\r\n"
+        event, self._new_part = self._new_part, asyncio.Event()
+        event.set()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            request = await reader.readuntil(b"\r\n\r\n")
+        except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, ConnectionError):
+            writer.close()
+            return
+        parts = request.split(b"\r\n", 1)[0].split()
+        path = parts[1].decode(errors="replace").split("?", 1)[0] if len(parts) >= 2 else ""
+        if len(parts) < 2 or parts[0] != b"GET" or path not in STREAM_PATHS:
+            writer.write(b"HTTP/1.0 404 Not Found\r\nContent-Length: 0\r\n\r\n")
+            with contextlib.suppress(ConnectionError):
+                await writer.drain()
+            writer.close()
+            return
+        writer.write(
+            b"HTTP/1.0 200 OK\r\nCache-Control: no-cache\r\nConnection: close\r\n"
+            b"Content-Type: multipart/x-mixed-replace; boundary=" + BOUNDARY.encode() + b"\r\n\r\n"
+        )
+        self._clients += 1
+        try:
+            while True:
+                await self._new_part.wait()
+                if self._part is not None:
+                    writer.write(self._part)
+                    await writer.drain()
+        except ConnectionError:
+            pass
+        finally:
+            self._clients -= 1
+            writer.close()
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            if hasattr(self._server, "close_clients"):
+                self._server.close_clients()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(self._server.wait_closed(), 2.0)
+            self._server = None

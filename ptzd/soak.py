@@ -1,0 +1,907 @@
+"""Soak harness: the real daemon, the simulated dome and a real broker, for a long time.
+
+`ptzd soak --minutes N --report DIR [--faults serial-reset,stream-stall,broker-restart]`:
+
+- `ptzd sim-camera` runs as its own process (MJPEG over HTTP, Pelco over TCP);
+- `ptzd run` runs as another process with a real config file, its serial port going through
+  a TCP proxy here (which counts every Pelco command and can reset the line), the harness
+  acting as systemd (`NOTIFY_SOCKET`, `WATCHDOG_USEC`) to read STATUS= and watchdog pings;
+- a real mosquitto, watched by an MQTT subscriber that counts messages.
+
+Inside the daemon process a probe thread (`python -m ptzd.soak probe ...`, which then runs
+the ordinary `ptzd` CLI) measures event-loop lag and the asyncio task count; RSS and open fds
+come from /proc. Everything is written to `DIR/report.json` plus `DIR/soak.png`.
+
+`--virtual-clock` runs the in-process closed loop (`ptzd sim --virtual-clock`) for N
+simulated minutes as fast as it goes, with the same probe and /proc sampling (no faults:
+there is no separate process to break).
+
+Faults, each with its expected recovery (checked, see docs/reliability.md):
+- `serial-reset`: every proxied serial connection is reset (TCP RST) and the port refuses
+  connections for 2 s. Expect a reconnect whose first two commands are STOP, STOP.
+- `stream-stall`: the sim-camera process is frozen (SIGSTOP) for 6 s. Expect a STOP on the
+  wire within `max_track_age_s` + 1 s, the watchdog to stop being fed, and frames to resume.
+- `broker-restart`: mosquitto is killed (SIGKILL) and restarted 2 s later on the same port.
+  Expect `availability` = `online` (retained) to be republished.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import statistics
+import struct
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from ptzd.errors import UsageError
+from ptzd.pelco.codec import FrameParser, Motion
+
+FAULTS = ("serial-reset", "stream-stall", "broker-restart")
+STALL_S = 6.0
+STOP_WITHIN_S = 1.5  # max_track_age_s (0.5) + a control tick + the wire
+OUTAGE_S = 2.0
+WATCHDOG_USEC = 10_000_000  # pings every 5 s, as the shipped unit's WatchdogSec=10
+CAMERA = "soak"
+INIT_BOX = "290,170,60,140"  # until the first MQTT select: whatever is in the view centre
+RESELECT_S = 60.0
+_STATUS = re.compile(r"frames (\d+), dropped (\d+)")
+
+
+@dataclass(frozen=True)
+class SoakOptions:
+    minutes: float
+    report_dir: Path
+    faults: tuple[str, ...] = ()
+    virtual_clock: bool = False
+    sample_s: float = 2.0
+    warmup_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if not self.minutes > 0:
+            raise UsageError(f"--minutes must be > 0; got {self.minutes}")
+        unknown = [f for f in self.faults if f not in FAULTS]
+        if unknown:
+            raise UsageError(f"unknown fault(s) {unknown}; choose from {', '.join(FAULTS)}")
+        if self.virtual_clock and self.faults:
+            raise UsageError("--faults need the real-time soak (no --virtual-clock)")
+
+
+# --- the probe, inside the measured process ------------------------------------------------
+
+
+def _probe_loop(loop: asyncio.AbstractEventLoop, path: Path, interval: float) -> None:
+    """Every `interval` s: schedule a callback on `loop` and time how late it runs (lag);
+    the callback counts the loop's tasks. One JSON line per sample."""
+    with path.open("a", encoding="utf-8") as out:
+        while not loop.is_closed():
+            time.sleep(interval)
+            sample: dict[str, float] = {}
+            done = threading.Event()
+            asked = time.monotonic()
+
+            def measure(
+                asked: float = asked,
+                sample: dict[str, float] = sample,
+                done: threading.Event = done,
+            ) -> None:
+                sample["lag_s"] = time.monotonic() - asked
+                sample["tasks"] = len(asyncio.all_tasks(loop))
+                done.set()
+
+            try:
+                loop.call_soon_threadsafe(measure)
+            except RuntimeError:  # the loop closed between the check and the call
+                return
+            if not done.wait(timeout=30.0):
+                sample = {"lag_s": time.monotonic() - asked}
+            sample["t"] = time.monotonic()
+            sample["threads"] = threading.active_count()
+            out.write(json.dumps(sample) + "\n")
+            out.flush()
+
+
+def run_probed(path: Path, interval: float, argv: Sequence[str]) -> int:
+    """Run the `ptzd` CLI with `argv`, probing every event loop it creates."""
+
+    class ProbePolicy(asyncio.DefaultEventLoopPolicy):
+        def new_event_loop(self) -> asyncio.AbstractEventLoop:
+            loop = super().new_event_loop()
+            threading.Thread(
+                target=_probe_loop, args=(loop, path, interval), name="soak-probe", daemon=True
+            ).start()
+            return loop
+
+    asyncio.set_event_loop_policy(ProbePolicy())
+    from ptzd.cli import main
+
+    return main(list(argv))
+
+
+# --- the parts around the daemon -----------------------------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+class Mosquitto:
+    """A local mosquitto on a fixed port, startable again after a kill."""
+
+    def __init__(self, workdir: Path) -> None:
+        binary = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+        if not Path(binary).exists():
+            raise UsageError("mosquitto not found (scripts/system-deps.sh installs it)")
+        self.binary = binary
+        self.port = _free_port()
+        self.conf = workdir / "mosquitto.conf"
+        self.log = workdir / "mosquitto.log"
+        self.process: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        import getpass
+
+        self.conf.write_text(
+            f"user {getpass.getuser()}\nlistener {self.port} 127.0.0.1\n"
+            "allow_anonymous true\npersistence false\nlog_dest stderr\n"
+        )
+        with self.log.open("ab") as log:
+            self.process = await asyncio.create_subprocess_exec(
+                self.binary, "-c", str(self.conf), stdout=log, stderr=log
+            )
+        async with asyncio.timeout(10):  # ready when the port accepts connections
+            while True:
+                with contextlib.suppress(OSError):
+                    _, writer = await asyncio.open_connection("127.0.0.1", self.port)
+                    writer.close()
+                    return
+                await asyncio.sleep(0.05)
+
+    async def kill(self) -> None:
+        if self.process is not None and self.process.returncode is None:
+            self.process.kill()
+            await self.process.wait()
+
+    async def stop(self) -> None:
+        if self.process is not None and self.process.returncode is None:
+            self.process.terminate()
+            await self.process.wait()
+
+
+@dataclass
+class _Connection:
+    opened: float
+    writer: asyncio.StreamWriter
+    first_commands: list[Motion | str] = field(default_factory=list)
+
+
+class SerialProxy:
+    """TCP proxy between the daemon's `socket://` port and the simulated dome.
+
+    Counts every Pelco frame the daemon sends, remembers the first commands of each
+    connection (STOP, STOP after a reconnect) and can reset the line (TCP RST)."""
+
+    def __init__(self, upstream: tuple[str, int], now: Callable[[], float]) -> None:
+        self.upstream = upstream
+        self.now = now
+        self.port = 0
+        self.server: asyncio.Server | None = None
+        self.connections: list[_Connection] = []
+        self.commands = 0
+        self.stops = 0
+        self.last_motion: Motion | None = None
+        self.stop_times: list[float] = []
+        self._live: list[asyncio.StreamWriter] = []
+
+    async def start(self) -> None:
+        self.server = await asyncio.start_server(self._client, "127.0.0.1", self.port)
+        self.port = self.server.sockets[0].getsockname()[1]
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            up_reader, up_writer = await asyncio.open_connection(*self.upstream)
+        except OSError:
+            writer.close()
+            return
+        conn = _Connection(self.now(), writer)
+        self.connections.append(conn)
+        self._live += [writer, up_writer]
+        parser = FrameParser()
+
+        async def downstream() -> None:  # dome replies -> daemon
+            with contextlib.suppress(ConnectionError, OSError):
+                while data := await up_reader.read(4096):
+                    writer.write(data)
+                    await writer.drain()
+
+        back = asyncio.create_task(downstream())
+        try:
+            with contextlib.suppress(ConnectionError, OSError):
+                while data := await reader.read(4096):
+                    for frame in parser.feed(data):
+                        self._count(conn, frame.command)
+                    up_writer.write(data)
+                    await up_writer.drain()
+        finally:
+            back.cancel()
+            for w in (writer, up_writer):
+                with contextlib.suppress(Exception):
+                    w.close()
+                with contextlib.suppress(ValueError):
+                    self._live.remove(w)
+
+    def _count(self, conn: _Connection, command: object) -> None:
+        self.commands += 1
+        name: Motion | str = command if isinstance(command, Motion) else type(command).__name__
+        if len(conn.first_commands) < 3:
+            conn.first_commands.append(name)
+        if isinstance(command, Motion):
+            self.last_motion = command
+            if command.is_stop:
+                self.stops += 1
+                self.stop_times.append(self.now())
+
+    async def reset(self, outage_s: float) -> None:
+        """RST every connection and refuse new ones for `outage_s`."""
+        assert self.server is not None
+        self.server.close()
+        for writer in list(self._live):
+            sock = writer.get_extra_info("socket")
+            if sock is not None:
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            writer.transport.abort()
+        await asyncio.sleep(outage_s)
+        await self.start()
+
+    async def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+        for writer in list(self._live):
+            writer.transport.abort()
+
+
+class MqttWatcher:
+    """Counts every message under the camera's topics; notes when `online` is (re)published."""
+
+    def __init__(self, port: int, now: Callable[[], float]) -> None:
+        self.port = port
+        self.now = now
+        self.messages = 0
+        self.online_times: list[float] = []
+        self.connects = 0
+
+    async def run(self) -> None:
+        import aiomqtt
+
+        while True:
+            try:
+                async with aiomqtt.Client("127.0.0.1", self.port, timeout=5) as client:
+                    self.connects += 1
+                    await client.subscribe(f"ptzd/{CAMERA}/#")
+                    async for message in client.messages:
+                        self.messages += 1
+                        topic = str(message.topic)
+                        if topic.endswith("/availability") and message.payload == b"online":
+                            self.online_times.append(self.now())
+            except aiomqtt.MqttError:
+                await asyncio.sleep(0.5)
+
+
+class NotifySocket:
+    """The systemd side of sd_notify: STATUS= lines and WATCHDOG=1 pings, timestamped."""
+
+    def __init__(self, path: Path, now: Callable[[], float]) -> None:
+        self.path = path
+        self.now = now
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.pings: list[float] = []
+        self.frames = 0
+        self.dropped = 0
+        self.frame_times: list[tuple[float, int]] = []
+        self.ready = False
+
+    def open(self) -> None:
+        self.path.unlink(missing_ok=True)
+        self.sock.bind(str(self.path))
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            data = await loop.sock_recv(self.sock, 65536)
+            for line in data.decode(errors="replace").splitlines():
+                key, _, value = line.partition("=")
+                if key == "WATCHDOG" and value == "1":
+                    self.pings.append(self.now())
+                elif key == "READY":
+                    self.ready = True
+                elif key == "STATUS" and (match := _STATUS.search(value)):
+                    self.frames, self.dropped = int(match.group(1)), int(match.group(2))
+                    self.frame_times.append((self.now(), self.frames))
+
+    def close(self) -> None:
+        self.sock.close()
+        self.path.unlink(missing_ok=True)
+
+
+def proc_sample(pid: int) -> dict[str, float]:
+    """RSS (MB) and open file descriptors of a live process, from /proc."""
+    rss_kb = 0
+    with contextlib.suppress(OSError):
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                rss_kb = int(line.split()[1])
+    try:
+        fds = sum(1 for _ in Path(f"/proc/{pid}/fd").iterdir())
+    except OSError:
+        fds = -1
+    return {"rss_mb": rss_kb / 1024, "fds": fds}
+
+
+def _last_probe(path: Path) -> dict[str, Any]:
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        lines = path.read_text().splitlines()
+        last: dict[str, Any] = json.loads(lines[-1])
+        return last
+    return {}
+
+
+def _last_json_line(path: Path) -> dict[str, Any] | None:
+    """The last complete JSON line of a file another process is appending to."""
+    with contextlib.suppress(OSError), path.open("rb") as f:
+        f.seek(max(0, f.seek(0, os.SEEK_END) - 8192))
+        for raw in reversed(f.read().splitlines()):
+            with contextlib.suppress(ValueError):
+                value: dict[str, Any] = json.loads(raw)
+                return value
+    return None
+
+
+def _probe_lags(path: Path) -> list[float]:
+    with contextlib.suppress(OSError):
+        return [json.loads(line)["lag_s"] for line in path.read_text().splitlines() if line]
+    return []
+
+
+async def _spawn(argv: Sequence[str], log: IO[bytes], **kw: Any) -> asyncio.subprocess.Process:
+    return await asyncio.create_subprocess_exec(
+        *argv, stdout=asyncio.subprocess.PIPE, stderr=log, **kw
+    )
+
+
+async def _announced(
+    process: asyncio.subprocess.Process, prefixes: tuple[str, ...]
+) -> dict[str, str]:
+    """Read `prefix value` lines from a child's stdout until every prefix was seen."""
+    assert process.stdout is not None
+    found: dict[str, str] = {}
+    async with asyncio.timeout(30):
+        while len(found) < len(prefixes):
+            raw = await process.stdout.readline()
+            if not raw:
+                raise RuntimeError(f"child exited before announcing {prefixes}")
+            word, _, value = raw.decode().strip().partition(" ")
+            if word in prefixes:
+                found[word] = value
+    return found
+
+
+async def _drain(stream: asyncio.StreamReader | None, sink: IO[bytes]) -> None:
+    if stream is None:
+        return
+    while data := await stream.read(65536):
+        sink.write(data)
+        sink.flush()
+
+
+def _percentile(values: Sequence[float], q: float) -> float | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
+
+
+# --- the real-time soak ---------------------------------------------------------------------
+
+
+class Soak:
+    def __init__(self, options: SoakOptions) -> None:
+        self.options = options
+        self.dir = options.report_dir
+        self.t0 = time.monotonic()
+        self.samples: list[dict[str, Any]] = []
+        self.fault_log: list[dict[str, Any]] = []
+        self.selections: list[dict[str, Any]] = []
+
+    def now(self) -> float:
+        return time.monotonic() - self.t0
+
+    def _config_text(self, http_url: str, serial_port: int, mqtt_port: int) -> str:
+        return (
+            f'[camera]\nname = "{CAMERA}"\n[logging]\nformat = "json"\n'
+            f'[capture]\nsource = "{http_url}"\n'
+            f'[serial]\nport = "socket://127.0.0.1:{serial_port}"\nreconnect_max_s = 1.0\n'
+            f'[mqtt]\nenabled = true\nurl = "mqtt://127.0.0.1:{mqtt_port}"\n'
+            "reconnect_max_s = 1.0\n"
+        )
+
+    async def run(self) -> dict[str, Any]:
+        opts = self.options
+        self.dir.mkdir(parents=True, exist_ok=True)
+        duration = opts.minutes * 60.0
+        broker = Mosquitto(self.dir)
+        await broker.start()
+        py = sys.executable
+        sim_log = (self.dir / "sim-camera.log").open("wb")
+        daemon_log = (self.dir / "daemon.log").open("wb")
+        tasks: list[asyncio.Task[None]] = []
+        sim: asyncio.subprocess.Process | None = None
+        daemon: asyncio.subprocess.Process | None = None
+        proxy: SerialProxy | None = None
+        notify = NotifySocket(Path(f"/tmp/ptzd-soak-{os.getpid()}.sock"), self.now)
+        probe = self.dir / "probe.jsonl"
+        probe.unlink(missing_ok=True)
+        exit_code: int | None = None
+        try:
+            sim = await _spawn(
+                [py, "-m", "ptzd", "--log-format", "json", "sim-camera", "--scene",
+                 "synthetic:0", "--serial", "tcp://127.0.0.1:0", "--http", "127.0.0.1:0",
+                 "--loop", "--record", str(self.dir / "sim")],
+                sim_log,
+            )  # fmt: skip
+            announced = await _announced(sim, ("serial", "http"))
+            tasks.append(asyncio.create_task(_drain(sim.stdout, sim_log)))
+            host, _, port = announced["serial"].removeprefix("socket://").rpartition(":")
+            proxy = SerialProxy((host, int(port)), self.now)
+            await proxy.start()
+            config = self.dir / "ptzd.toml"
+            config.write_text(self._config_text(announced["http"], proxy.port, broker.port))
+            config.chmod(0o600)
+            notify.open()
+            env = {
+                **os.environ,
+                "NOTIFY_SOCKET": str(notify.path),
+                "WATCHDOG_USEC": str(WATCHDOG_USEC),
+            }
+            daemon = await asyncio.create_subprocess_exec(
+                py, "-m", "ptzd.soak", "probe", str(probe), "1.0", "run", "--config",
+                str(config), "--init", INIT_BOX,
+                stdout=daemon_log, stderr=daemon_log, env=env,
+            )  # fmt: skip
+            watcher = MqttWatcher(broker.port, self.now)
+            tasks += [
+                asyncio.create_task(notify.run()),
+                asyncio.create_task(watcher.run()),
+            ]
+            schedule = [
+                ((i + 1) * duration / (len(opts.faults) + 1), name)
+                for i, name in enumerate(opts.faults)
+            ]
+            await self._wait_for(lambda: notify.ready, 60)
+            next_sample = 0.0
+            next_select = self.now()
+            while self.now() < duration:
+                if self.now() >= next_select:  # the scenario: follow a new walker each minute
+                    await self._select(broker.port)
+                    next_select += RESELECT_S
+                if daemon.returncode is not None:
+                    break
+                if schedule and self.now() >= schedule[0][0]:
+                    _, name = schedule.pop(0)
+                    await self._inject(name, proxy, sim, broker, notify, watcher)
+                    continue
+                if self.now() >= next_sample:
+                    self._sample(daemon.pid, probe, proxy, notify, watcher)
+                    next_sample += opts.sample_s
+                await asyncio.sleep(0.2)
+            if daemon.returncode is None:
+                daemon.send_signal(signal.SIGTERM)
+                async with asyncio.timeout(30):
+                    exit_code = await daemon.wait()
+            else:
+                exit_code = daemon.returncode
+            await asyncio.sleep(0.3)  # the last STOP reaches the proxy
+        finally:
+            for task in tasks:
+                task.cancel()
+            for child in (daemon, sim):
+                if child is not None and child.returncode is None:
+                    with contextlib.suppress(ProcessLookupError):
+                        child.send_signal(signal.SIGCONT)
+                        child.terminate()
+                    with contextlib.suppress(TimeoutError):
+                        async with asyncio.timeout(10):
+                            await child.wait()
+                    if child.returncode is None:
+                        child.kill()
+                        await child.wait()
+            if proxy is not None:
+                await proxy.close()
+            await broker.stop()
+            notify.close()
+            sim_log.close()
+            daemon_log.close()
+        report = self._report(exit_code, probe, proxy, notify, watcher)
+        (self.dir / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+        draw_plots(report, self.dir / "soak.png")
+        return report
+
+    def _sample(
+        self,
+        pid: int,
+        probe: Path,
+        proxy: SerialProxy,
+        notify: NotifySocket,
+        watcher: MqttWatcher,
+    ) -> None:
+        last = _last_probe(probe)
+        self.samples.append(
+            {
+                "t": round(self.now(), 2),
+                **proc_sample(pid),
+                "tasks": last.get("tasks"),
+                "lag_ms": round(1000 * last["lag_s"], 2) if "lag_s" in last else None,
+                "threads": last.get("threads"),
+                "commands": proxy.commands,
+                "mqtt_messages": watcher.messages,
+                "frames": notify.frames,
+                "dropped": notify.dropped,
+                "watchdog_pings": len(notify.pings),
+            }
+        )
+
+    async def _inject(
+        self,
+        name: str,
+        proxy: SerialProxy,
+        sim: asyncio.subprocess.Process,
+        broker: Mosquitto,
+        notify: NotifySocket,
+        watcher: MqttWatcher,
+    ) -> None:
+        start = self.now()
+        entry: dict[str, Any] = {"fault": name, "at_s": round(start, 2)}
+        if name == "serial-reset":
+            before = len(proxy.connections)
+            await proxy.reset(OUTAGE_S)
+            end = self.now()
+            await self._wait_for(lambda: len(proxy.connections) > before, 15)
+            await self._wait_for(lambda: len(proxy.connections[-1].first_commands) >= 2, 15)
+            conn = proxy.connections[-1] if len(proxy.connections) > before else None
+            first = conn.first_commands[:2] if conn else []
+            entry |= {
+                "expected": "reconnect; first commands STOP, STOP",
+                "first_commands": [str(c) for c in first],
+                "recovered": conn is not None and first == [Motion(), Motion()],
+                "recovery_s": round(conn.opened - end, 2) if conn else None,
+            }
+        elif name == "stream-stall":
+            pings_before = len(notify.pings)
+            frames_before = notify.frames
+            sim.send_signal(signal.SIGSTOP)
+            await asyncio.sleep(STOP_WITHIN_S)
+            wire_after = proxy.last_motion  # what the dome was last told
+            await asyncio.sleep(STALL_S - STOP_WITHIN_S)
+            stops = [t for t in proxy.stop_times if t > start]
+            pings_late = [t for t in notify.pings[pings_before:] if t > start + 3.0]
+            sim.send_signal(signal.SIGCONT)
+            end = self.now()
+            await self._wait_for(lambda: notify.frames > frames_before + 5, 30)
+            resumed = notify.frames > frames_before + 5
+            entry |= {
+                "expected": f"dome stopped within {STOP_WITHIN_S} s; watchdog unfed; frames resume",
+                "wire_motion_after_s": str(wire_after),
+                "stop_after_s": round(stops[0] - start, 2) if stops else None,
+                "watchdog_pings_while_stalled": len(pings_late),
+                "recovered": wire_after == Motion() and not pings_late and resumed,
+                # STATUS= comes every 5 s: this is an upper bound
+                "recovery_s": _round(self._first_after(notify.frame_times, end, frames_before))
+                if resumed
+                else None,
+            }
+        elif name == "broker-restart":
+            onlines = len(watcher.online_times)
+            await broker.kill()
+            await asyncio.sleep(OUTAGE_S)
+            await broker.start()
+            end = self.now()
+            await self._wait_for(lambda: len(watcher.online_times) > onlines, 30)
+            recovered = len(watcher.online_times) > onlines
+            entry |= {
+                "expected": "retained availability=online republished after reconnect",
+                "recovered": recovered,
+                "recovery_s": round(watcher.online_times[-1] - end, 2) if recovered else None,
+            }
+        self.fault_log.append(entry)
+
+    async def _select(self, mqtt_port: int) -> None:
+        """Pick the biggest walker well inside the view (ground truth of the sim's latest
+        frame) and send `{"select": box}` over MQTT, as an operator would."""
+        import aiomqtt
+
+        record = _last_json_line(self.dir / "sim" / "groundtruth_view.jsonl")
+        boxes = {
+            walker: box
+            for walker, box in (record or {}).get("boxes", {}).items()
+            if box is not None and 80 < box[0] + box[2] / 2 < 560 and box[3] > 30
+        }
+        if not boxes or record is None:
+            return
+        walker, box = max(boxes.items(), key=lambda item: item[1][2] * item[1][3])
+        with contextlib.suppress(aiomqtt.MqttError):
+            async with aiomqtt.Client("127.0.0.1", mqtt_port, timeout=5) as client:
+                payload = json.dumps({"select": [round(v, 1) for v in box]})
+                await client.publish(f"ptzd/{CAMERA}/ptz", payload.encode(), qos=1)
+                self.selections.append(
+                    {"t": round(self.now(), 2), "frame": record["frame"], "walker": walker}
+                )
+
+    def _centring(self) -> dict[str, Any]:
+        """How far the selected walker's centre stayed from the view centre (ground truth),
+        as a fraction of the half-width/height, from 3 s after each selection."""
+        path = self.dir / "sim" / "groundtruth_view.jsonl"
+        if not self.selections or not path.exists():
+            return {}
+        errors_x: list[float] = []
+        errors_y: list[float] = []
+        seen = total = 0
+        marks = [(s["frame"], s["walker"]) for s in self.selections]
+        with path.open(encoding="utf-8") as lines:
+            for line in lines:
+                with contextlib.suppress(ValueError):
+                    rec = json.loads(line)
+                    active = [w for f, w in marks if f + 75 <= rec["frame"]]  # 3 s at 25 fps
+                    if not active:
+                        continue
+                    total += 1
+                    box = rec["boxes"].get(active[-1])
+                    if box is None:
+                        continue
+                    seen += 1
+                    errors_x.append(abs(box[0] + box[2] / 2 - 320) / 320)
+                    errors_y.append(abs(box[1] + box[3] / 2 - 240) / 240)
+        return {
+            "frames": total,
+            "target_visible": round(seen / total, 3) if total else None,
+            "median_abs_ex": _round(statistics.median(errors_x), 3) if errors_x else None,
+            "median_abs_ey": _round(statistics.median(errors_y), 3) if errors_y else None,
+        }
+
+    @staticmethod
+    def _first_after(times: list[tuple[float, int]], after: float, frames: int) -> float | None:
+        for t, count in times:
+            if t >= after and count > frames:
+                return t - after
+        return None
+
+    @staticmethod
+    async def _wait_for(predicate: Callable[[], bool], limit_s: float) -> None:
+        """Wait until `predicate()` holds or `limit_s` passed. The state lives in other
+        processes (sockets, files), so there is no event to await: poll at 10 Hz."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(limit_s):
+                while not predicate():  # noqa: ASYNC110
+                    await asyncio.sleep(0.1)
+
+    def _report(
+        self,
+        exit_code: int | None,
+        probe: Path,
+        proxy: SerialProxy | None,
+        notify: NotifySocket,
+        watcher: MqttWatcher | None,
+    ) -> dict[str, Any]:
+        opts = self.options
+        warm = [s for s in self.samples if s["t"] >= min(opts.warmup_s, opts.minutes * 30)]
+        rss = [s["rss_mb"] for s in warm if s["rss_mb"]]
+        fds = [s["fds"] for s in warm if s["fds"] >= 0]
+        tasks = [s["tasks"] for s in warm if s["tasks"] is not None]
+        lags = [1000 * v for v in _probe_lags(probe)]
+        log_text = (self.dir / "daemon.log").read_text(errors="replace")
+        errors = [
+            line for line in log_text.splitlines()
+            if '"level": "error"' in line or '"level": "critical"' in line
+        ]  # fmt: skip
+        elapsed = self.samples[-1]["t"] if self.samples else 0.0
+        growth = round(rss[-1] - rss[0], 2) if rss else None
+        gaps = [b - a for a, b in zip(notify.pings, notify.pings[1:], strict=False)]
+        summary = {
+            "duration_s": round(elapsed, 1),
+            "daemon_exit_code": exit_code,
+            "rss_mb_after_warmup": round(rss[0], 2) if rss else None,
+            "rss_mb_end": round(rss[-1], 2) if rss else None,
+            "rss_growth_mb": growth,
+            "fds_min_max": [min(fds), max(fds)] if fds else None,
+            "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
+            "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
+            "loop_lag_ms_p99": _round(_percentile(lags, 0.99)),
+            "loop_lag_ms_max": _round(max(lags) if lags else None),
+            "frames": notify.frames,
+            "frames_dropped": notify.dropped,
+            "commands": proxy.commands if proxy else 0,
+            "command_rate_hz": round(proxy.commands / elapsed, 2) if proxy and elapsed else None,
+            "stops": proxy.stops if proxy else 0,
+            "last_motion_is_stop": bool(proxy and proxy.last_motion == Motion()),
+            "last_motion": str(proxy.last_motion) if proxy else None,
+            "mqtt_messages": watcher.messages if watcher else 0,
+            "watchdog_pings": len(notify.pings),
+            "watchdog_max_gap_s": _round(max(gaps) if gaps else None),
+            "error_log_lines": len(errors),
+            "unhandled_exception": "Traceback" in log_text,
+        }
+        checks = {
+            "clean_exit": exit_code == 0,
+            "dome_left_stopped": summary["last_motion_is_stop"],
+            "no_unhandled_exception": not summary["unhandled_exception"],
+            "rss_growth_below_5mb": growth is not None and growth < 5.0,
+            "no_fd_leak": bool(fds) and max(fds) - min(fds) <= 8,
+            "no_task_leak": bool(tasks) and max(tasks) - min(tasks) <= 8,
+            "faults_recovered": all(f.get("recovered") for f in self.fault_log),
+        }
+        return {
+            "options": {
+                "minutes": opts.minutes,
+                "faults": list(opts.faults),
+                "virtual_clock": opts.virtual_clock,
+                "sample_s": opts.sample_s,
+                "warmup_s": opts.warmup_s,
+            },
+            "summary": summary,
+            "checks": checks,
+            "ok": all(checks.values()),
+            "faults": self.fault_log,
+            "selections": self.selections,
+            "centring": self._centring(),
+            "samples": self.samples,
+            "errors": errors[:20],
+        }
+
+
+def _round(value: float | None, digits: int = 2) -> float | None:
+    return None if value is None else round(value, digits)
+
+
+# --- the virtual-clock soak -----------------------------------------------------------------
+
+
+async def run_virtual(options: SoakOptions) -> dict[str, Any]:
+    """`ptzd sim --virtual-clock` for N simulated minutes in a probed child process."""
+    out = options.report_dir
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / "probe.jsonl"
+    probe.unlink(missing_ok=True)
+    start = time.monotonic()
+    samples: list[dict[str, Any]] = []
+    with (out / "sim.log").open("wb") as log:
+        child = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "ptzd.soak", "probe", str(probe), "1.0", "--log-format",
+            "json", "sim", "--virtual-clock", "--duration", str(options.minutes * 60),
+            "--record", str(out / "sim"), stdout=log, stderr=log,
+        )  # fmt: skip
+        while child.returncode is None:
+            last = _last_probe(probe)
+            samples.append(
+                {
+                    "t": round(time.monotonic() - start, 2),
+                    **proc_sample(child.pid),
+                    "tasks": last.get("tasks"),
+                    "lag_ms": round(1000 * last["lag_s"], 2) if "lag_s" in last else None,
+                }
+            )
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(options.sample_s):
+                    await child.wait()
+    rss = [s["rss_mb"] for s in samples if s["rss_mb"]]
+    warm = rss[len(rss) // 5 :] or rss
+    fds = [s["fds"] for s in samples if s["fds"] >= 0]
+    lags = [1000 * v for v in _probe_lags(probe)]
+    log_text = (out / "sim.log").read_text(errors="replace")
+    # `ptzd sim` stops when its scene ends (synthetic:0 is ~44 s): say what really ran
+    try:
+        sim_report = json.loads((out / "sim" / "report.json").read_text())
+        simulated = float(sim_report.get("duration_s", 0.0))
+    except (OSError, ValueError):
+        simulated = 0.0
+    summary = {
+        "asked_s": options.minutes * 60,
+        "simulated_s": simulated,
+        "wall_s": round(time.monotonic() - start, 1),
+        "exit_code": child.returncode,
+        "rss_mb_after_warmup": round(warm[0], 2) if warm else None,
+        "rss_mb_end": round(warm[-1], 2) if warm else None,
+        "rss_growth_mb": round(warm[-1] - warm[0], 2) if warm else None,
+        "fds_min_max": [min(fds), max(fds)] if fds else None,
+        "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
+        "unhandled_exception": "Traceback" in log_text,
+    }
+    report = {
+        "options": {"minutes": options.minutes, "virtual_clock": True},
+        "summary": summary,
+        "ok": child.returncode == 0
+        and not summary["unhandled_exception"]
+        and simulated >= 0.99 * options.minutes * 60,
+        "samples": samples,
+    }
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    draw_plots(report, out / "soak.png")
+    return report
+
+
+# --- plots ------------------------------------------------------------------------------------
+
+_PANELS = (
+    ("rss_mb", "RSS (MB)"),
+    ("fds", "open fds"),
+    ("tasks", "asyncio tasks"),
+    ("lag_ms", "event-loop lag (ms)"),
+    ("commands", "Pelco commands (cumulative)"),
+    ("mqtt_messages", "MQTT messages (cumulative)"),
+)
+
+
+def draw_plots(report: dict[str, Any], path: Path) -> None:
+    """One panel per sampled series, fault times as red lines; drawn with cv2."""
+    import cv2
+    import numpy as np
+
+    samples = report.get("samples", [])
+    panels = [(k, title) for k, title in _PANELS if any(s.get(k) is not None for s in samples)]
+    width, panel_h, margin = 900, 150, 60
+    image = np.full((panel_h * max(1, len(panels)) + 20, width, 3), 255, np.uint8)
+    if not samples:
+        cv2.imwrite(str(path), image)
+        return
+    t_end = max(s["t"] for s in samples) or 1.0
+
+    def x_of(t: float) -> int:
+        return int(margin + (width - margin - 20) * t / t_end)
+
+    for row, (key, title) in enumerate(panels):
+        top = row * panel_h + 20
+        points = [(s["t"], float(s[key])) for s in samples if s.get(key) is not None]
+        lo = min(v for _, v in points)
+        hi = max(v for _, v in points)
+        span = hi - lo or 1.0
+        bottom = top + panel_h - 40
+
+        def y_of(v: float, bottom: int = bottom, lo: float = lo, span: float = span) -> int:
+            return int(bottom - (panel_h - 60) * (v - lo) / span)
+
+        cv2.rectangle(image, (margin, top), (width - 20, bottom), (200, 200, 200), 1)
+        for fault in report.get("faults", []):
+            x = x_of(fault["at_s"])
+            cv2.line(image, (x, top), (x, bottom), (0, 0, 220), 1)
+        line = np.array([(x_of(t), y_of(v)) for t, v in points], np.int32)
+        cv2.polylines(image, [line], False, (160, 60, 0), 2)
+        label = f"{title}: {lo:.1f} .. {hi:.1f}"
+        cv2.putText(image, label, (margin, top - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
+    cv2.putText(image, f"t = 0 .. {t_end:.0f} s", (margin, image.shape[0] - 6),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)  # fmt: skip
+    cv2.imwrite(str(path), image)
+
+
+def run_soak(options: SoakOptions) -> dict[str, Any]:
+    if options.virtual_clock:
+        return asyncio.run(run_virtual(options))
+    return asyncio.run(Soak(options).run())
+
+
+if __name__ == "__main__":
+    if len(sys.argv) >= 4 and sys.argv[1] == "probe":
+        sys.exit(run_probed(Path(sys.argv[2]), float(sys.argv[3]), sys.argv[4:]))
+    sys.exit("usage: python -m ptzd.soak probe FILE INTERVAL_S PTZD_ARGS...")

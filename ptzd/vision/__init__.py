@@ -1,0 +1,1 @@
+"""Vision: detection and particle-filter tracking."""

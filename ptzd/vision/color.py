@@ -1,0 +1,451 @@
+"""Colour likelihood (Chang 2020, seed 002 eqs. 6-11 and 16), vectorised.
+
+A box's colour model is an Epanechnikov-weighted histogram of quantised HSV colours
+(6 x 6 x 6 = 216 bins by default). Instead of visiting every pixel of every particle box,
+each box is sampled on a fixed `grid_cols x grid_rows` grid of normalised positions whose
+kernel weights are computed once: all N histograms then come from one gather into a
+bin-index image (computed only over the particles' bounding region) and one `np.bincount`
+over `particle * (bins + 1) + bin`. Samples outside the frame fall into an extra
+"outside" bin that no target model has, so a box half out of the frame loses similarity
+instead of being judged on its visible half alone.
+
+Beyond the seed: grey and near-black pixels can be collapsed into hue bin 0 (their hue is
+noise), and the target model can be background-weighted: colours frequent in a ring
+around the target are down-weighted (Ning et al.'s corrected background-weighted
+histogram applied to the target model only).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ptzd.vision.config import ColorConfig, GmmConfig
+from ptzd.vision.gmm import GmmTargetModel
+from ptzd.vision.likelihood import FloatArray, Frame
+
+BinImage = NDArray[np.uint8] | NDArray[np.int16]
+Step = tuple[int, int]
+# Background colours rarer than this share of the ring keep full weight in the target model.
+_BACKGROUND_FLOOR = 0.02
+# Coarsest pixel step of the bin image for large boxes (see ColorLikelihood._bin_step).
+_MAX_BIN_STEP = 4
+# The background ring is re-measured every this many adapt() calls (it changes slowly).
+_RING_EVERY = 3
+
+
+@dataclass(frozen=True, eq=False)
+class BinLuts:
+    """Per-channel lookup tables from 8-bit full-range HSV to a bin index."""
+
+    hue: NDArray[np.int16]
+    saturation: NDArray[np.int16]
+    value: NDArray[np.int16]
+    collapse: NDArray[np.int16] | None  # bin -> bin with hue dropped where it is noise
+    n_bins: int
+
+
+def make_luts(config: ColorConfig) -> BinLuts:
+    """Lookup tables for `config`'s quantisation: bin = h * (S * V) + s * V + v."""
+    levels = np.arange(256)
+    bh, bs, bv = config.bins_h, config.bins_s, config.bins_v
+    hue = (levels * bh // 256 * (bs * bv)).astype(np.int16)
+    sat = (levels * bs // 256 * bv).astype(np.int16)
+    val = (levels * bv // 256).astype(np.int16)
+    n_bins = bh * bs * bv
+    collapse = None
+    if config.achromatic_collapse:
+        b = np.arange(n_bins)
+        h, s, v = b // (bs * bv), (b // bv) % bs, b % bv
+        h = np.where((s == 0) | (v == 0), 0, h)  # grey or dark: hue is noise
+        s = np.where(v == 0, 0, s)  # dark: saturation is noise too
+        collapse = (h * (bs * bv) + s * bv + v).astype(np.int16)
+    return BinLuts(hue, sat, val, collapse, n_bins)
+
+
+_CHANNEL_SUM = np.ones((1, 3), np.float32)
+
+
+@functools.lru_cache(maxsize=8)
+def _channel_table(luts: BinLuts) -> NDArray[np.uint8]:
+    """A 3-channel cv2.LUT table: H, S and V levels to their bin terms (n_bins < 256)."""
+    table = np.stack([luts.hue, luts.saturation, luts.value], axis=1).astype(np.uint8)
+    return table.reshape(256, 1, 3)
+
+
+@functools.lru_cache(maxsize=8)
+def _collapse_table(luts: BinLuts) -> NDArray[np.uint8]:
+    table = np.zeros(256, np.uint8)
+    if luts.collapse is not None:
+        table[: luts.n_bins] = luts.collapse
+    return table
+
+
+def bin_image(bgr: Frame, luts: BinLuts) -> BinImage:
+    """Bin index of every pixel of a BGR image (uint8 when the bins fit, else int16).
+
+    Grey input (H x W or H x W x 1, e.g. a thermal camera) is read as achromatic BGR: every
+    pixel falls in the value-only bins, so the colour tracker still runs on it.
+    """
+    if bgr.ndim == 2 or bgr.shape[2] == 1:
+        bgr = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_GRAY2BGR), dtype=np.uint8)
+    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV_FULL)
+    if luts.n_bins < 256:
+        # three OpenCV uint8 kernels: per-channel LUT to the bin terms, their sum (never
+        # above n_bins - 1 < 255), the achromatic collapse
+        terms = cv2.LUT(hsv, _channel_table(luts))
+        bins8 = cv2.transform(terms, _CHANNEL_SUM)
+        if luts.collapse is not None:
+            bins8 = cv2.LUT(bins8, _collapse_table(luts))
+        out8: NDArray[np.uint8] = np.asarray(bins8, dtype=np.uint8).reshape(bgr.shape[:2])
+        return out8
+    bins: NDArray[np.int16] = (
+        luts.hue[hsv[..., 0]] + luts.saturation[hsv[..., 1]] + luts.value[hsv[..., 2]]
+    )
+    if luts.collapse is not None:
+        bins = luts.collapse[bins]
+    return bins
+
+
+@dataclass(frozen=True, eq=False)
+class SampleGrid:
+    """Normalised sample offsets in a box (-0.5..0.5), their weights and stripe ("part").
+
+    The rows are split top to bottom into `parts` horizontal stripes with a histogram each
+    (a pedestrian's top and legs); each stripe's weights sum to one.
+    """
+
+    u: FloatArray  # (cols,) horizontal offsets, in box widths from the centre
+    v: FloatArray  # (rows,) vertical offsets, in box heights from the centre
+    weights: FloatArray  # (rows, cols)
+    part: NDArray[np.intp]  # (rows,) stripe of each row
+    parts: int
+
+
+def _offsets(n: int, extent: float = 1.0) -> FloatArray:
+    return ((np.arange(n) + 0.5) / n - 0.5) * extent
+
+
+def _split(weights: FloatArray, parts: int) -> tuple[FloatArray, NDArray[np.intp]]:
+    rows = weights.shape[0]
+    part = (np.arange(rows) * parts // rows).astype(np.intp)
+    sums = np.bincount(part, weights=weights.sum(axis=1), minlength=parts)
+    return weights / sums[part][:, None], part
+
+
+def kernel_grid(
+    cols: int, rows: int, kernel: str = "ellipse", aspect: float = 1.0, parts: int = 1
+) -> SampleGrid:
+    """Epanechnikov-weighted grid (seed eq. 6; the constant 3/4 cancels in the normalisation).
+
+    `ellipse`: radius 1 on the ellipse inscribed in the box (Comaniciu, Nummiaro);
+    `diagonal`: the seed's normalisation a = sqrt(w^2 + h^2) for a box of aspect w/h.
+    With several parts each stripe gets its own kernel, centred on the stripe.
+    """
+    u = _offsets(cols)
+    rows_per_part = rows // parts
+    v_local = _offsets(rows_per_part)  # within one stripe, -0.5..0.5 of its height
+    v = (np.arange(rows) + 0.5) / rows - 0.5
+    if kernel == "ellipse":
+        r2 = (2 * u[None, :]) ** 2 + (2 * np.tile(v_local, parts)[:, None]) ** 2
+    else:
+        stripe_aspect = aspect * parts
+        r2 = ((u[None, :] * stripe_aspect) ** 2 + np.tile(v_local, parts)[:, None] ** 2) / (
+            stripe_aspect**2 + 1.0
+        )
+    weights, part = _split(np.clip(1.0 - r2, 0.0, None), parts)
+    return SampleGrid(u, v, weights, part, parts)
+
+
+def ring_grid(cols: int, rows: int, ring_scale: float) -> SampleGrid:
+    """Uniform grid over a box `ring_scale` times larger, excluding the box itself."""
+    u, v = _offsets(cols, ring_scale), _offsets(rows, ring_scale)
+    inside = (np.abs(u[None, :]) < 0.5) & (np.abs(v[:, None]) < 0.5)
+    weights, part = _split(np.where(inside, 0.0, 1.0), 1)
+    return SampleGrid(u, v, weights, part, 1)
+
+
+@functools.lru_cache(maxsize=16)
+def _tiled_weights(grid: SampleGrid, n: int) -> FloatArray:
+    """The grid's weights repeated for n boxes, contiguous (bincount wants a flat array)."""
+    return np.tile(grid.weights.ravel(), n)
+
+
+@functools.lru_cache(maxsize=16)
+def _offsets_for(grid: SampleGrid, n: int, n_bins: int) -> NDArray[np.intp]:
+    """Histogram column offset of every sample: box * parts * (bins + 1) + part * (bins + 1)."""
+    per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None, None]
+    return per_box + (grid.part * (n_bins + 1))[None, :, None]
+
+
+def bins_for_region(
+    frame: Frame, region: tuple[int, int, int, int], luts: BinLuts, step: Step = (1, 1)
+) -> BinImage:
+    """`pad_bins` of the bin image of `frame[y0:y1, x0:x1]`, every `step` = (sx, sy) pixel."""
+    x0, y0, x1, y1 = region
+    sx, sy = step
+    return pad_bins(bin_image(frame[y0:y1:sy, x0:x1:sx], luts), luts.n_bins)
+
+
+def pad_bins(bins: BinImage, n_bins: int) -> BinImage:
+    """`bins` with a one-pixel border of the "outside" bin `n_bins`, for `box_histograms`."""
+    if bins.dtype == np.uint8:
+        border = cv2.copyMakeBorder(bins, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=n_bins)
+        out: NDArray[np.uint8] = np.asarray(border, dtype=np.uint8)
+        return out
+    height, width = bins.shape
+    padded = np.full((height + 2, width + 2), n_bins, dtype=bins.dtype)
+    padded[1:-1, 1:-1] = bins
+    return padded
+
+
+def box_histograms(
+    padded: BinImage,
+    origin: tuple[int, int],
+    boxes: FloatArray,
+    grid: SampleGrid,
+    n_bins: int,
+    step: Step = (1, 1),
+) -> FloatArray:
+    """Weighted histograms (N x parts x (n_bins + 1)) of `boxes` (cx, cy, w, h) on `grid`.
+
+    `padded` is `pad_bins` of the bin image of the frame region whose top-left pixel is
+    `origin` (x0, y0). Samples outside that region are clipped onto the border and so
+    counted in the last ("outside") column, without masks. Each part sums to one.
+    With `step` = (sx, sy) other than (1, 1) the bin image holds every sx-th column and
+    sy-th row of the region (`bins_for_region`), and a sample takes the retained pixel at or
+    above-left of it.
+    """
+    n = boxes.shape[0]
+    height, width = padded.shape[0] - 2, padded.shape[1] - 2
+    if step == (1, 1):
+        x0, y0 = origin[0] - 1, origin[1] - 1
+        xs = np.floor(boxes[:, 0:1] - x0 + boxes[:, 2:3] * grid.u[None, :]).astype(np.intp)
+        ys = np.floor(boxes[:, 1:2] - y0 + boxes[:, 3:4] * grid.v[None, :]).astype(np.intp)
+    else:
+        xs = np.floor((boxes[:, 0:1] - origin[0] + boxes[:, 2:3] * grid.u[None, :]) / step[0])
+        ys = np.floor((boxes[:, 1:2] - origin[1] + boxes[:, 3:4] * grid.v[None, :]) / step[1])
+        xs = xs.astype(np.intp) + 1
+        ys = ys.astype(np.intp) + 1
+    # (np.minimum/maximum: np.clip's Python wrapper costs more than the work at this size)
+    np.minimum(np.maximum(xs, 0, out=xs), width + 1, out=xs)
+    np.minimum(np.maximum(ys, 0, out=ys), height + 1, out=ys)
+    ys *= width + 2
+    index = ys[:, :, None] + xs[:, None, :]
+    sampled = padded.ravel().take(index)
+    stride = grid.parts * (n_bins + 1)
+    np.add(_offsets_for(grid, n, n_bins), sampled, out=index)
+    hist: FloatArray = np.bincount(
+        index.ravel(), weights=_tiled_weights(grid, n), minlength=n * stride
+    ).astype(np.float64, copy=False)
+    return hist.reshape(n, grid.parts, n_bins + 1)
+
+
+def bhattacharyya(p: FloatArray, q: FloatArray) -> FloatArray:
+    """rho = sum_u sqrt(p_u q_u) (seed eq. 10), averaged over parts.
+
+    `p` is N x parts x (m + 1) (the extra "outside" column never matches), `q` parts x m.
+    """
+    return bhattacharyya_sqrt(np.sqrt(p), sqrt_model(q))
+
+
+def sqrt_model(q: FloatArray) -> FloatArray:
+    """sqrt(q) (parts x m) as a flat vector with a zero "outside" column per part, divided
+    by the number of parts: `bhattacharyya_sqrt`'s operand, computed once per model."""
+    parts, m = q.shape
+    out = np.zeros((parts, m + 1))
+    out[:, :m] = np.sqrt(q) / parts
+    return out.ravel()
+
+
+def bhattacharyya_sqrt(sqrt_p: FloatArray, sqrt_q: FloatArray) -> FloatArray:
+    """`bhattacharyya` from sqrt(p) (N x parts x (m + 1)) and `sqrt_model(q)`: one matvec."""
+    rho: FloatArray = sqrt_p.reshape(sqrt_p.shape[0], -1) @ sqrt_q
+    return rho
+
+
+def background_weights(ring: FloatArray, floor: float = _BACKGROUND_FLOOR) -> FloatArray:
+    """v_u = min(o* / o_u, 1): colours common around the target count less.
+
+    o* is the smallest non-zero ring share, but never below `floor` so a noisy ring does
+    not wipe out every colour but the rarest.
+    """
+    nonzero = ring[ring > 0]
+    o_star = max(float(nonzero.min()) if nonzero.size else 1.0, floor)
+    with np.errstate(divide="ignore"):
+        return np.where(ring > 0, np.minimum(o_star / ring, 1.0), 1.0)
+
+
+def _normalised(h: FloatArray) -> FloatArray:
+    """Each row (last axis) scaled to sum to one; an empty row becomes uniform."""
+    total = h.sum(axis=-1, keepdims=True)
+    safe = np.where(total > 0, total, 1.0)
+    return np.where(total > 0, h / safe, 1.0 / h.shape[-1])
+
+
+class ColorLikelihood:
+    """Seed 002's colour likelihood with the GMM-updated target model."""
+
+    def __init__(self, config: ColorConfig, gmm: GmmConfig) -> None:
+        self._config = config
+        self._gmm_config = gmm
+        self._luts = make_luts(config)
+        self._ring_grid = ring_grid(32, 32, config.ring_scale)
+        self._contrast_grid = ring_grid(8, 16, config.contrast_scale)
+        self._grid = kernel_grid(
+            config.grid_cols, config.grid_rows, config.kernel, parts=config.parts
+        )
+        self._gmm: GmmTargetModel | None = None
+        self._ring: FloatArray | None = None
+        self._weighted_model: FloatArray = np.zeros((config.parts, self._luts.n_bins))
+        # sqrt_model() of the weighted model, its part-mean and the plain model
+        self._sqrt_weighted: FloatArray = sqrt_model(self._weighted_model)
+        self._sqrt_weighted_mean: FloatArray = sqrt_model(self._weighted_model[:1])
+        self._sqrt_model: FloatArray = sqrt_model(self._weighted_model)
+        self._box: FloatArray = np.zeros(4)
+        # Bin image of the current frame, reused across calls for the same frame.
+        self._frame: Frame | None = None
+        self._bins: BinImage = np.zeros((0, 0), np.int16)
+        self._origin = (0, 0)
+        self._step: Step = (1, 1)  # of the cached bin image (see _bin_step)
+        self._region_end = (0, 0)
+        self._adapted = 0  # adapt() calls since init()
+        self._last: tuple[Frame | None, FloatArray, FloatArray] = (None, np.zeros(4), np.zeros(0))
+
+    @property
+    def n_bins(self) -> int:
+        return self._luts.n_bins
+
+    @property
+    def model(self) -> FloatArray:
+        """The current (GMM-updated, not background-weighted) target model, parts x bins."""
+        if self._gmm is None:
+            raise RuntimeError("init() first")
+        return self._gmm.model
+
+    # -- bin image over a region, cached per frame --------------------------------------
+
+    def _region_of(self, frame: Frame, boxes: FloatArray) -> tuple[int, int, int, int]:
+        height, width = frame.shape[:2]
+        half = boxes[:, 2:] / 2
+        lo = np.floor((boxes[:, :2] - half).min(axis=0))
+        hi = np.ceil((boxes[:, :2] + half).max(axis=0))
+        x0 = min(max(int(lo[0]), 0), width - 1)
+        y0 = min(max(int(lo[1]), 0), height - 1)
+        return (
+            x0,
+            y0,
+            min(max(int(hi[0]) + 1, x0 + 1), width),
+            min(max(int(hi[1]) + 1, y0 + 1), height),
+        )
+
+    def _bin_step(self) -> Step:
+        """Pixel steps (sx, sy) of the bin image: the grid samples a box every w/cols x h/rows
+        pixels anyway, so for large boxes converting every pixel is wasted (beyond the seed)."""
+        cfg = self._config
+        sx = min(max(int(self._box[2] / cfg.grid_cols), 1), _MAX_BIN_STEP)
+        sy = min(max(int(self._box[3] / cfg.grid_rows), 1), _MAX_BIN_STEP)
+        return sx, sy
+
+    def _bins_for(self, frame: Frame, boxes: FloatArray) -> tuple[BinImage, tuple[int, int]]:
+        x0, y0, x1, y1 = self._region_of(frame, boxes)
+        if self._frame is frame:
+            cx0, cy0 = self._origin
+            cx1, cy1 = self._region_end
+            if x0 >= cx0 and y0 >= cy0 and x1 <= cx1 and y1 <= cy1:
+                return self._bins, self._origin
+            x0, y0 = min(x0, cx0), min(y0, cy0)
+            x1, y1 = max(x1, cx1), max(y1, cy1)
+        else:
+            self._step = self._bin_step()
+        self._frame = frame
+        self._bins = bins_for_region(frame, (x0, y0, x1, y1), self._luts, self._step)
+        self._origin = (x0, y0)
+        self._region_end = (x1, y1)
+        return self._bins, self._origin
+
+    def histograms(self, frame: Frame, boxes: FloatArray) -> FloatArray:
+        """Kernel histograms (N x parts x (bins + 1); last column = outside) of `boxes`."""
+        bins, origin = self._bins_for(frame, boxes)
+        return box_histograms(bins, origin, boxes, self._grid, self.n_bins, self._step)
+
+    def _ring_histogram(self, frame: Frame, box: FloatArray) -> FloatArray:
+        scale = self._config.ring_scale
+        outer = box[None, :] * np.array([1.0, 1.0, scale, scale])
+        bins, origin = self._bins_for(frame, outer)
+        ring = box_histograms(bins, origin, box[None, :], self._ring_grid, self.n_bins, self._step)[
+            0, 0
+        ]
+        return _normalised(ring[: self.n_bins])
+
+    def _reweight(self) -> None:
+        assert self._gmm is not None
+        q = self._gmm.model
+        if self._config.background_weighting and self._ring is not None:
+            q = _normalised(q * background_weights(self._ring)[None, :])
+        self._weighted_model = q
+        self._sqrt_weighted = sqrt_model(q)
+        self._sqrt_weighted_mean = sqrt_model(q.mean(axis=0, keepdims=True))
+        self._sqrt_model = sqrt_model(self._gmm.model)
+
+    # -- Likelihood protocol --------------------------------------------------------------
+
+    def init(self, frame: Frame, box: FloatArray) -> None:
+        self._frame = None
+        self._adapted = 0
+        self._box = box.copy()  # before the histograms: it sets the bin image's step
+        cfg = self._config
+        self._grid = kernel_grid(
+            cfg.grid_cols, cfg.grid_rows, cfg.kernel, aspect=float(box[2] / box[3]), parts=cfg.parts
+        )
+        target = self.histograms(frame, box[None, :])[0]
+        self._gmm = GmmTargetModel(_normalised(target[:, : self.n_bins]), self._gmm_config)
+        self._ring = self._ring_histogram(frame, box) if cfg.background_weighting else None
+        self._reweight()
+
+    def log_likelihood(self, frame: Frame, boxes: FloatArray) -> FloatArray:
+        cfg = self._config
+        grow = max(cfg.ring_scale if cfg.background_weighting else 1.0, cfg.contrast_scale)
+        # one bin image for the particles, their contrast rings and the ring adapt() needs
+        bins, origin = self._bins_for(
+            frame, np.vstack([boxes, self._box[None, :]]) * [1, 1, grow, grow]
+        )
+        hist = box_histograms(bins, origin, boxes, self._grid, self.n_bins, self._step)
+        rho = bhattacharyya_sqrt(np.sqrt(hist, out=hist), self._sqrt_weighted)
+        if cfg.scale_contrast > 0:
+            ring = box_histograms(bins, origin, boxes, self._contrast_grid, self.n_bins, self._step)
+            ring_rho = bhattacharyya_sqrt(np.sqrt(ring, out=ring), self._sqrt_weighted_mean)
+            rho -= cfg.scale_contrast * ring_rho
+        return -(1.0 - rho) / (2.0 * cfg.sigma * cfg.sigma)
+
+    def similarity(self, frame: Frame, box: FloatArray) -> float:
+        hist = self.histograms(frame, box[None, :])
+        self._last = (frame, box.copy(), hist[0])
+        rho = float(bhattacharyya_sqrt(np.sqrt(hist), self._sqrt_model)[0])
+        return min(max(rho, 0.0), 1.0)
+
+    def adapt(self, frame: Frame, box: FloatArray) -> None:
+        if self._gmm is None:
+            raise RuntimeError("init() first")
+        last_frame, last_box, last_hist = self._last
+        if last_frame is frame and np.array_equal(last_box, box):
+            observed = last_hist  # similarity() just measured this very box
+        else:
+            observed = self.histograms(frame, box[None, :])[0]
+        self._gmm.update(_normalised(observed[:, : self.n_bins]))
+        self._adapted += 1
+        if self._ring is not None and self._adapted % _RING_EVERY == 0:
+            # every _RING_EVERY frames at the compounded rate: the same time constant as
+            # every frame at `background_rate`, for a third of the work
+            rate = 1.0 - (1.0 - self._config.background_rate) ** _RING_EVERY
+            self._ring = (1.0 - rate) * self._ring + rate * self._ring_histogram(frame, box)
+        self._box = box.copy()
+        self._reweight()
+
+    def rescale(self, factor: float) -> None:
+        # Normalised histograms are scale-free; only the remembered box size changes.
+        self._box = self._box * np.array([1.0, 1.0, factor, factor])

@@ -1,0 +1,237 @@
+"""Configuration of the tracker (`[tracker]` and its sub-tables).
+
+Defaults follow the seed (Chang 2020, shared/seeds/002) where it gives a value; every
+value the seed leaves open is marked as ours in config/ptzd.toml and docs/tracking.md.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from ptzd.schema import StrictModel
+
+
+class MotionConfig(StrictModel):
+    """Prediction step: how particles move between frames (state x, vx, y, vy, w, h)."""
+
+    # constant_velocity: seed 002 eq. 14, s_t = A s_{t-1} + noise;
+    # ar2: Ko 2013 eqs. 12-14, second-order autoregressive on the estimated track.
+    model: Literal["constant_velocity", "ar2"] = "constant_velocity"
+    # Seed 002's active-camera state covariance (10, 1, 10, 1, 1, 2), pixels per frame.
+    sigma_x: float = Field(default=10.0, ge=0.0, le=200.0)
+    sigma_vx: float = Field(default=1.0, ge=0.0, le=50.0)
+    sigma_y: float = Field(default=10.0, ge=0.0, le=200.0)
+    sigma_vy: float = Field(default=1.0, ge=0.0, le=50.0)
+    sigma_w: float = Field(default=1.0, ge=0.0, le=50.0)
+    sigma_h: float = Field(default=2.0, ge=0.0, le=50.0)
+    # Velocity kept per frame while the target is occluded (1 = coast at full speed).
+    occluded_velocity_decay: float = Field(default=0.95, ge=0.0, le=1.0)
+
+
+class ColorConfig(StrictModel):
+    """Colour likelihood: HSV kernel histograms compared with the Bhattacharyya coefficient."""
+
+    bins_h: int = Field(default=6, ge=1, le=32)
+    bins_s: int = Field(default=6, ge=1, le=32)
+    bins_v: int = Field(default=6, ge=1, le=32)
+    # Hue is noise for grey and near-black pixels: put them in hue bin 0 (beyond the seed).
+    achromatic_collapse: bool = True
+    # Fixed sampling grid per particle box (columns x rows).
+    grid_cols: int = Field(default=16, ge=2, le=128)
+    grid_rows: int = Field(default=32, ge=2, le=128)
+    # Horizontal stripes with a histogram each, top to bottom (beyond the seed's one):
+    # tells a dark jacket over jeans from a dark coat over dark trousers.
+    parts: int = Field(default=2, ge=1, le=8)
+    # Epanechnikov kernel radius: ellipse inscribed in the box, or the seed's a = sqrt(w^2+h^2).
+    kernel: Literal["ellipse", "diagonal"] = "ellipse"
+    # Likelihood width: weight = exp(-(1 - rho) / (2 sigma^2)) (seed eq. 16).
+    sigma: float = Field(default=0.1, gt=0.0, le=10.0)
+    # Background-weighted target model (beyond the seed): down-weight colours of the ring
+    # between the box and the box scaled by `ring_scale`.
+    background_weighting: bool = True
+    ring_scale: float = Field(default=2.0, gt=1.0, le=5.0)
+    # Per-frame rate at which the ring histogram follows the current surroundings.
+    background_rate: float = Field(default=0.1, ge=0.0, le=1.0)
+    # Scale cue (beyond the seed): a box's score is rho - scale_contrast * rho_ring, rho_ring
+    # the similarity of the ring out to `contrast_scale` x the box to the target. A box too
+    # small has a target-coloured ring, so the colour histogram no longer favours shrinking.
+    scale_contrast: float = Field(default=0.5, ge=0.0, le=2.0)
+    contrast_scale: float = Field(default=1.5, gt=1.0, le=3.0)
+
+    @model_validator(mode="after")
+    def _rows_split_into_parts(self) -> ColorConfig:
+        if self.grid_rows % self.parts:
+            raise ValueError("grid_rows must be a multiple of parts")
+        return self
+
+
+class GmmConfig(StrictModel):
+    """Target-model update: K Gaussians per histogram bin (seed eqs. 22-27)."""
+
+    components: int = Field(default=3, ge=1, le=8)
+    # Mixing weights of the components in descending-pi order (seed eq. 23: A, B, C).
+    mix: tuple[float, ...] = (0.6, 0.25, 0.15)
+    alpha: float = Field(default=0.05, ge=0.0, le=1.0)
+    beta: float = Field(default=0.01, ge=0.0, le=1.0)
+    initial_sigma: float = Field(default=1.0, gt=0.0, le=10.0)
+    # A bin is updated only if it moved less than this since the last frame (seed step 3).
+    diff_threshold: float = Field(default=0.1, gt=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _mix_matches_components(self) -> GmmConfig:
+        if len(self.mix) != self.components:
+            raise ValueError(f"mix needs {self.components} weights (one per component)")
+        if any(m < 0 for m in self.mix) or abs(sum(self.mix) - 1.0) > 1e-6:
+            raise ValueError("mix weights must be >= 0 and sum to 1")
+        return self
+
+
+class ResamplingConfig(StrictModel):
+    """Neff-triggered weighted resampling (seed eqs. 17-21)."""
+
+    # Resample when N_eff < neff_rate * N (seed eq. 19 `rate`).
+    neff_rate: float = Field(default=0.5, gt=0.0, le=1.0)
+    # Only the top `top_rate` share of particles reproduce (seed eq. 20, top = 0.2).
+    top_rate: float = Field(default=0.2, gt=0.0, le=1.0)
+    # multinomial: the seed's binary search on cumulative weights; systematic: lower variance.
+    method: Literal["multinomial", "systematic"] = "multinomial"
+
+
+class OcclusionConfig(StrictModel):
+    """Colour occlusion handler: low similarity means occluded, not lost (seed Fig. 12)."""
+
+    # ths_sim: below this the estimate is occluded (no resampling, no model update).
+    similarity_threshold: float = Field(default=0.6, ge=0.0, le=1.0)
+    # Give up (LOST) after this many consecutive occluded frames.
+    max_frames: int = Field(default=30, ge=1, le=10_000)
+    # While not tracking, particle centres stay within this many box sizes of the coasting box.
+    search_radius: float = Field(default=1.5, gt=0.0, le=20.0)
+    # While LOST keep searching and come back when similarity reaches this (beyond the seed).
+    reacquire: bool = True
+    reacquire_threshold: float = Field(default=0.8, ge=0.0, le=1.0)
+    # Re-lock only after this many consecutive frames at reacquire_threshold (beyond the seed).
+    reacquire_frames: int = Field(default=2, ge=1, le=100)
+    # The search radius grows by this many box sizes per occluded frame, up to max_search_radius.
+    search_growth: float = Field(default=0.1, ge=0.0, le=10.0)
+    max_search_radius: float = Field(default=6.0, gt=0.0, le=50.0)
+    # Share of the particles redrawn uniformly over the search region each frame while LOST
+    # (the rest keep diffusing from where they were).
+    spread_share: float = Field(default=0.3, ge=0.0, le=1.0)
+    # While LOST, scan a coarse grid of boxes over the whole frame every this many frames and
+    # seed particles at the best ones (0 = never).
+    scan_every: int = Field(default=5, ge=0, le=1000)
+
+    @model_validator(mode="after")
+    def _reacquire_above_occlusion(self) -> OcclusionConfig:
+        if self.reacquire_threshold < self.similarity_threshold:
+            raise ValueError("reacquire_threshold must be >= similarity_threshold")
+        if self.max_search_radius < self.search_radius:
+            raise ValueError("max_search_radius must be >= search_radius")
+        return self
+
+
+class ScaleConfig(StrictModel):
+    """Scale adaptation, bounded so the box neither collapses nor explodes (beyond the seed)."""
+
+    # Share of the particles' mean size taken into the reported size per frame.
+    rate: float = Field(default=0.1, ge=0.0, le=1.0)
+    # Size limits relative to the reference size (the init box, rescaled on zoom).
+    min_scale: float = Field(default=0.5, gt=0.0, le=1.0)
+    max_scale: float = Field(default=2.0, ge=1.0, le=20.0)
+    # Allowed relative deviation of a particle's aspect ratio from the reference one.
+    aspect_tolerance: float = Field(default=0.15, ge=0.0, le=2.0)
+
+
+class RfConfig(StrictModel):
+    """Online random-forest tracker (Ko 2013, seed 000): thermal or visible grey input."""
+
+    num_particles: int = Field(default=120, ge=10, le=5000)  # seed: N = 120
+    # LID bins per subblock (seed: eight LID input variables).
+    lid_bins: int = Field(default=8, ge=2, le=64)
+    # LID samples per subblock side (ours: the kernel histogram is gathered on a grid).
+    lid_samples: int = Field(default=6, ge=2, le=32)
+    # OCS-LBP threshold T on centre-symmetric differences (seed: "a small value"; ours).
+    ocs_threshold: float = Field(default=5.0, ge=0.0, le=255.0)
+    trees: int = Field(default=4, ge=1, le=64)  # seed: 4 trees per forest
+    max_depth: int = Field(default=20, ge=1, le=64)  # seed: depth 20
+    # Features tried per node (seed: "m variables"; ours: ~sqrt(8)).
+    features_per_node: int = Field(default=3, ge=1, le=64)
+    # State from the top J particles (seed eq. 19: J = 15).
+    top_particles: int = Field(default=15, ge=1, le=5000)
+    sigma_xy: float = Field(default=6.4, ge=0.0, le=200.0)  # seed eq. 13
+    sigma_wh: float = Field(default=0.64, ge=0.0, le=50.0)  # seed eq. 14
+    # Memory (seed sec. 4.3): 15 positives, 30 negatives, 5 early positives kept for good.
+    positives: int = Field(default=15, ge=2, le=500)
+    negatives: int = Field(default=30, ge=2, le=1000)
+    kept_positives: int = Field(default=5, ge=0, le=500)
+    # Learning condition (seed eqs. 21-22): U_max = min(u_cap, alpha / ln var), U_min = U_max - gap.
+    u_cap: float = Field(default=0.72, ge=0.0, le=1.0)
+    alpha: float = Field(default=5.4, gt=0.0, le=100.0)
+    occlusion_gap: float = Field(default=0.4, ge=0.0, le=1.0)
+    # T2: consecutive full-occlusion frames before the track is terminated (LOST).
+    max_occluded: int = Field(default=30, ge=1, le=10_000)
+    # Negatives: same-size boxes whose centre is this many box sizes away, at most (ours).
+    negative_reach: float = Field(default=2.0, gt=0.6, le=10.0)
+    # False: learn once on the first frame only (the static-RF ablation of seed sec. 5.4).
+    online: bool = True
+
+    @model_validator(mode="after")
+    def _memory_fits(self) -> RfConfig:
+        if self.kept_positives >= self.positives:
+            raise ValueError("kept_positives must be < positives")
+        if self.top_particles > self.num_particles:
+            raise ValueError("top_particles must be <= num_particles")
+        return self
+
+
+class SvmConfig(StrictModel):
+    """SVM + Lucas-Kanade tracker (Sun 2015, seed 004)."""
+
+    num_particles: int = Field(default=100, ge=10, le=5000)
+    # Training set at init (seed: 50 positives near the box, 150 background negatives).
+    positives: int = Field(default=50, ge=2, le=1000)
+    negatives: int = Field(default=150, ge=2, le=2000)
+    # Retrain after this many new positives (seed: 15).
+    retrain_after: int = Field(default=15, ge=1, le=1000)
+    svm_c: float = Field(default=1.0, gt=0.0, le=1000.0)
+    # h1: LK residual (mean squared error / template variance) above which the PF takes
+    # over. Ours: the seed's 0.003 belongs to a normalisation it does not spell out.
+    lk_error: float = Field(default=0.1, gt=0.0, le=10.0)
+    # h2: Platt confidence above which LK resumes and the patch becomes a positive (seed 0.8).
+    confidence: float = Field(default=0.8, ge=0.0, le=1.0)
+    # Below this confidence the target counts as occluded (ours).
+    occluded_below: float = Field(default=0.3, ge=0.0, le=1.0)
+    max_occluded: int = Field(default=30, ge=1, le=10_000)
+    # LK template at most this many pixels on its longer side; iterations per frame (ours).
+    template_size: int = Field(default=32, ge=8, le=256)
+    lk_iterations: int = Field(default=10, ge=1, le=100)
+    # Feature sample grid per box side and PF random-walk sigma in box sizes (ours).
+    grid: int = Field(default=16, ge=4, le=64)
+    sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)
+    sigma_scale: float = Field(default=0.02, ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _occlusion_below_confidence(self) -> SvmConfig:
+        if self.occluded_below > self.confidence:
+            raise ValueError("occluded_below must be <= confidence")
+        return self
+
+
+class TrackerConfig(StrictModel):
+    """Which tracker runs and its particle-filter parameters."""
+
+    kind: Literal["color", "rf", "svm"] = "color"
+    num_particles: int = Field(default=300, ge=10, le=5000)
+    seed: int = Field(default=0, ge=0)
+    # mean: seed eq. 15 weighted mean of all particles; top: weighted mean of the top_rate share.
+    estimate: Literal["mean", "top"] = "mean"
+    motion: MotionConfig = MotionConfig()
+    color: ColorConfig = ColorConfig()
+    gmm: GmmConfig = GmmConfig()
+    resampling: ResamplingConfig = ResamplingConfig()
+    occlusion: OcclusionConfig = OcclusionConfig()
+    scale: ScaleConfig = ScaleConfig()
+    rf: RfConfig = RfConfig()
+    svm: SvmConfig = SvmConfig()

@@ -1,0 +1,410 @@
+"""The weighted-resampling particle filter (Chang 2020, seed 002) with occlusion handling.
+
+State per particle: (x, vx, y, vy, w, h), x and y the box centre (seed eq. 12). Per frame:
+ego-motion compensation, prediction (seed eq. 14 constant velocity, or Ko 2013's
+second-order autoregressive model), weighting by the pluggable likelihood, weighted-mean
+estimate (eq. 15), occlusion test at the estimate, and - only while the target is visible -
+Neff-triggered weighted resampling (eqs. 17-21) and the target-model update.
+Every array operation runs over all particles at once; nothing loops over particles.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ptzd.vision.config import ResamplingConfig, TrackerConfig
+from ptzd.vision.likelihood import FloatArray, Frame, Likelihood
+from ptzd.vision.tracking import Box, TrackResult, TrackState
+
+# Column indices of the particle state.
+X, VX, Y, VY, W, H = range(6)
+# How much of each frame's centre displacement enters the reported velocity.
+_VELOCITY_SMOOTHING = 0.3
+# At most this many boxes in a frame-wide re-acquisition scan.
+_SCAN_MAX = 600
+
+
+def effective_sample_size(weights: FloatArray) -> float:
+    """N_eff = 1 / sum(w^2) of normalised weights (seed eq. 18)."""
+    return float(1.0 / np.sum(weights * weights))
+
+
+def weighted_resample(
+    weights: FloatArray, config: ResamplingConfig, rng: np.random.Generator
+) -> NDArray[np.intp]:
+    """Indices of the resampled set: the seed's weighted resampling (eqs. 20-21).
+
+    The top `top_rate` share of particles by weight each survive once; the remaining
+    N - N_top slots are drawn from that top set in proportion to weight - by the seed's
+    binary search on normalised cumulative weights (multinomial) or systematically.
+    """
+    n = weights.shape[0]
+    n_top = min(n, max(1, round(config.top_rate * n)))
+    top = np.argsort(-weights, kind="stable")[:n_top]
+    top_weights = weights[top]
+    total = float(top_weights.sum())
+    cumulative = np.cumsum(top_weights) / total if total > 0 else np.arange(1, n_top + 1) / n_top
+    draws = n - n_top
+    if config.method == "systematic":
+        r = (rng.random() + np.arange(draws)) / max(draws, 1)
+    else:
+        r = rng.random(draws)
+    # smallest j with c'_j >= r (seed step 4c)
+    picks = np.minimum(np.searchsorted(cumulative, r, side="left"), n_top - 1)
+    return np.concatenate([top, top[picks]])
+
+
+def apply_homography(
+    homography: FloatArray, boxes: FloatArray, velocities: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Map centre boxes (M x 4) and velocities (M x 2) from the previous frame to this one."""
+    cx, cy, w, h = boxes.T
+    probes = np.stack(
+        [
+            np.stack([cx, cy], 1),
+            np.stack([cx - w / 2, cy], 1),
+            np.stack([cx + w / 2, cy], 1),
+            np.stack([cx, cy - h / 2], 1),
+            np.stack([cx, cy + h / 2], 1),
+            np.stack([cx, cy], 1) + velocities,
+        ]
+    )  # (6, M, 2)
+    ones = np.ones((*probes.shape[:2], 1))
+    mapped = np.concatenate([probes, ones], axis=2) @ homography.T
+    mapped = mapped[..., :2] / mapped[..., 2:3]
+    centre = mapped[0]
+    new_w = np.linalg.norm(mapped[2] - mapped[1], axis=1)
+    new_h = np.linalg.norm(mapped[4] - mapped[3], axis=1)
+    out = np.column_stack([centre, new_w, new_h])
+    return out, mapped[5] - centre
+
+
+def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
+    """A 3x3 homography from a shift (dx, dy) or a 3x3 matrix; ValueError otherwise."""
+    m = np.asarray(ego_motion, dtype=np.float64)
+    if m.shape == (2,):
+        return np.array([[1.0, 0.0, m[0]], [0.0, 1.0, m[1]], [0.0, 0.0, 1.0]])
+    if m.shape == (3, 3) and np.all(np.isfinite(m)) and abs(np.linalg.det(m)) > 1e-12:
+        return m
+    raise ValueError(f"ego_motion must be a shift (2,) or an invertible 3x3, got {m.shape}")
+
+
+class ParticleTracker:
+    """A `Tracker` over any `Likelihood`; deterministic for a given `config.seed`."""
+
+    def __init__(self, config: TrackerConfig, likelihood: Likelihood) -> None:
+        self._config = config
+        self._likelihood = likelihood
+        n = config.num_particles
+        self._rng = np.random.default_rng(config.seed)
+        self._particles: FloatArray = np.zeros((n, 6))
+        self._weights: FloatArray = np.full(n, 1.0 / n)
+        m = config.motion
+        self._sigmas = np.array(
+            [m.sigma_x, m.sigma_vx, m.sigma_y, m.sigma_vy, m.sigma_w, m.sigma_h]
+        )
+        self._box: FloatArray = np.zeros(4)  # reported box, centre form
+        self._velocity: FloatArray = np.zeros(2)
+        self._reference: FloatArray = np.ones(2)  # reference (w, h) for the scale bounds
+        self._centres: deque[FloatArray] = deque(maxlen=3)  # for the AR2 model
+        self._state = TrackState.LOST
+        self._occluded_frames = 0
+        self._lost_frames = 0
+        self._reacquire_hits = 0  # consecutive LOST frames whose best candidate matched
+        self._confidence = 0.0
+        self._initialised = False
+        self.resampled = False  # whether the last update resampled (for tests and debugging)
+
+    # -- public API -----------------------------------------------------------------------
+
+    @property
+    def particles(self) -> FloatArray:
+        return self._particles
+
+    @property
+    def weights(self) -> FloatArray:
+        return self._weights
+
+    def init(self, frame: Frame, box: Box) -> None:
+        x, y, w, h = (float(v) for v in box)
+        if not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0:
+            raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+        self._rng = np.random.default_rng(self._config.seed)
+        centre = np.array([x + w / 2, y + h / 2, w, h])
+        target = np.array([centre[0], 0.0, centre[1], 0.0, w, h])
+        n = self._config.num_particles
+        # seed eq. 13: S_initial = I s_target + r.v.
+        self._particles = target + self._rng.standard_normal((n, 6)) * self._sigmas
+        self._weights = np.full(n, 1.0 / n)
+        self._reference = np.array([w, h])
+        self._box = centre
+        self._velocity = np.zeros(2)
+        self._centres.clear()
+        self._centres.append(centre[:2].copy())
+        self._constrain(frame)
+        self._likelihood.init(frame, centre)
+        self._state = TrackState.TRACKING
+        self._occluded_frames = 0
+        self._lost_frames = 0
+        self._reacquire_hits = 0
+        self._confidence = 1.0
+        self._initialised = True
+
+    def update(self, frame: Frame, ego_motion: NDArray[np.float64] | None = None) -> TrackResult:
+        if not self._initialised:
+            raise RuntimeError("init() the tracker before update()")
+        if ego_motion is not None:
+            self._apply(ego_motion_matrix(ego_motion))
+        self._predict()
+        if self._state is TrackState.LOST:
+            self._search(frame)
+        self._constrain(frame)
+        boxes = self._particles[:, [X, Y, W, H]]
+        log_l = self._likelihood.log_likelihood(frame, boxes)
+        weights = np.exp(log_l - log_l.max())
+        self._weights = weights / weights.sum()
+        was_lost = self._state is TrackState.LOST
+        if was_lost:
+            # the spread cloud can hold several look-alikes: test the best particle itself,
+            # not a mean between them
+            candidate = self._particles[int(np.argmax(self._weights))][[X, Y, W, H]]
+        else:
+            estimate = self._estimate()
+            # the occlusion test looks at the box we would report: estimate centre, smoothed size
+            rate = self._config.scale.rate
+            candidate = np.concatenate(
+                [estimate[:2], (1 - rate) * self._box[2:] + rate * estimate[2:]]
+            )
+        sim = self._likelihood.similarity(frame, candidate)
+        self._confidence = sim
+        was_tracking = self._state is TrackState.TRACKING
+        self._transition(sim)
+        self.resampled = False
+        if self._state is TrackState.TRACKING:
+            if was_lost:
+                self._relock(candidate)
+            self._follow(frame, candidate, learn_velocity=was_tracking)
+        else:
+            if self._reacquire_hits:
+                # a candidate matched: gather the cloud on it to confirm next frame
+                self._resample()
+            self._coast()
+        self._centres.append(self._box[:2].copy())
+        return self._result()
+
+    def rescale(self, factor: float, center: tuple[float, float]) -> None:
+        if not factor > 0 or not np.isfinite(factor):
+            raise ValueError(f"rescale factor must be positive, got {factor}")
+        cx, cy = center
+        zoom = np.array(
+            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
+        )
+        self._apply(zoom)
+        # seed eqs. 34-38: the box keeps the reference aspect ratio across zoom steps
+        aspect = self._reference[0] / self._reference[1]
+        area = self._box[2] * self._box[3]
+        self._box[2] = np.sqrt(area * aspect)
+        self._box[3] = self._box[2] / aspect
+        self._likelihood.rescale(factor)
+
+    @property
+    def state(self) -> TrackState:
+        return self._state
+
+    # -- steps ----------------------------------------------------------------------------
+
+    def _apply(self, homography: FloatArray) -> None:
+        """Move everything measured in the previous frame into this frame's pixels."""
+        p = self._particles
+        boxes, vel = apply_homography(homography, p[:, [X, Y, W, H]], p[:, [VX, VY]])
+        p[:, [X, Y, W, H]] = boxes
+        p[:, [VX, VY]] = vel
+        old_size = self._box[2:].copy()
+        box, v = apply_homography(homography, self._box[None, :], self._velocity[None, :])
+        self._box, self._velocity = box[0], v[0]
+        self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
+        if self._centres:
+            pts = np.array(self._centres)
+            mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
+            self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
+
+    def _predict(self) -> None:
+        p = self._particles
+        noise = self._rng.standard_normal(p.shape) * self._sigmas
+        if self._state is not TrackState.TRACKING:
+            p[:, [VX, VY]] *= self._config.motion.occluded_velocity_decay
+        if self._config.motion.model == "ar2":
+            # Ko 2013 eq. 13: mean of the last two track velocities, floored to pixels
+            c = list(self._centres)
+            if len(c) >= 3:
+                drift = np.floor(((c[-1] - c[-2]) + (c[-2] - c[-3])) / 2)
+            elif len(c) == 2:
+                drift = c[-1] - c[-2]
+            else:
+                drift = np.zeros(2)
+            if self._state is not TrackState.TRACKING:
+                drift = self._velocity
+            p[:, X] += drift[0] + noise[:, X]
+            p[:, Y] += drift[1] + noise[:, Y]
+            p[:, VX], p[:, VY] = drift[0], drift[1]
+            # eq. 14: sizes scatter around the previous target size
+            p[:, W] = self._box[2] + noise[:, W]
+            p[:, H] = self._box[3] + noise[:, H]
+        else:
+            # seed 002 eq. 14: s_t = A s_{t-1} + r.v., A = constant velocity
+            p[:, X] += p[:, VX]
+            p[:, Y] += p[:, VY]
+            p += noise
+
+    def _search_radius(self) -> float:
+        """Box sizes around the coasting box searched this frame: grows while occluded."""
+        occ = self._config.occlusion
+        frames = self._occluded_frames + self._lost_frames
+        return min(occ.search_radius + occ.search_growth * frames, occ.max_search_radius)
+
+    def _search(self, frame: Frame) -> None:
+        """Re-acquisition proposals while LOST (the target model stays frozen).
+
+        The lowest-weight `spread_share` of the particles are redrawn uniformly over the
+        (growing) search region around the coasting box; every `scan_every` frames they are
+        placed instead at the best boxes of a coarse scan of the whole frame. Not while a
+        candidate is being confirmed: then the cloud stays gathered on it. (While only
+        OCCLUDED the cloud just diffuses within the growing region: redrawing particles
+        then would scatter the cloud on every one-frame similarity dip.)
+        """
+        occ = self._config.occlusion
+        if self._reacquire_hits:
+            return
+        p = self._particles
+        k = round(occ.spread_share * len(p))
+        if k == 0:
+            return
+        idx = np.argsort(self._weights, kind="stable")[:k]
+        size = self._box[2:]
+        lost = self._state is TrackState.LOST
+        if lost and occ.scan_every and self._lost_frames % occ.scan_every == 0:
+            scan = self._scan_boxes(frame)
+            scores = self._likelihood.log_likelihood(frame, scan)
+            best = scan[np.argsort(-scores, kind="stable")[: max(1, k // 4)]]
+            seeds = best[np.arange(k) % len(best)]
+            jitter = self._rng.standard_normal((k, 2)) * (size / 8)
+            centres = seeds[:, :2] + jitter
+        else:
+            reach = self._search_radius() * size
+            centres = self._box[:2] + (2 * self._rng.random((k, 2)) - 1) * reach
+        p[idx, X], p[idx, Y] = centres[:, 0], centres[:, 1]
+        p[idx, VX] = 0.0
+        p[idx, VY] = 0.0
+        scale = 1.0 + 0.05 * self._rng.standard_normal(k)
+        p[idx, W], p[idx, H] = size[0] * scale, size[1] * scale
+
+    def _scan_boxes(self, frame: Frame) -> FloatArray:
+        """Boxes of the current size on a grid over the frame: half a box apart, <= _SCAN_MAX."""
+        height, width = frame.shape[:2]
+        w, h = (float(v) for v in self._box[2:])
+        step_x, step_y = w / 2, h / 2
+        count = (width / step_x) * (height / step_y)
+        if count > _SCAN_MAX:
+            coarser = float(np.sqrt(count / _SCAN_MAX))
+            step_x, step_y = step_x * coarser, step_y * coarser
+        xs = np.arange(min(w / 2, width / 2), max(width - w / 2, width / 2) + 1e-6, step_x)
+        ys = np.arange(min(h / 2, height / 2), max(height - h / 2, height / 2) + 1e-6, step_y)
+        gx, gy = np.meshgrid(xs, ys)
+        n = gx.size
+        return np.column_stack([gx.ravel(), gy.ravel(), np.full(n, w), np.full(n, h)])
+
+    def _constrain(self, frame: Frame) -> None:
+        """Bounded scale and aspect; centres in the frame (and near the box when coasting)."""
+        p = self._particles
+        sc = self._config.scale
+        ref_w, ref_h = self._reference
+        height, width = frame.shape[:2]
+        lo = np.array([0.0, -np.inf, 0.0, -np.inf, sc.min_scale * ref_w, sc.min_scale * ref_h])
+        hi = np.array([width, np.inf, height, np.inf, sc.max_scale * ref_w, sc.max_scale * ref_h])
+        if self._state is TrackState.OCCLUDED:
+            # (while LOST the frame-wide scan may have put particles anywhere)
+            reach = self._search_radius() * self._box[2:]
+            lo[[X, Y]] = np.maximum(lo[[X, Y]], self._box[:2] - reach)
+            hi[[X, Y]] = np.minimum(hi[[X, Y]], self._box[:2] + reach)
+        np.clip(p, lo, hi, out=p)
+        aspect = ref_h / ref_w
+        tol = 1.0 + sc.aspect_tolerance
+        np.clip(p[:, H], p[:, W] * aspect / tol, p[:, W] * aspect * tol, out=p[:, H])
+
+    def _estimate(self) -> FloatArray:
+        """Weighted mean state (seed eq. 15), optionally of the top share only."""
+        p, w = self._particles, self._weights
+        if self._config.estimate == "top":
+            n_top = max(1, round(self._config.resampling.top_rate * len(w)))
+            top = np.argsort(-w, kind="stable")[:n_top]
+            p, w = p[top], w[top] / w[top].sum()
+        state: FloatArray = w @ p
+        return state[[X, Y, W, H]]
+
+    def _transition(self, similarity: float) -> None:
+        occ = self._config.occlusion
+        if self._state is TrackState.LOST:
+            self._lost_frames += 1
+            if occ.reacquire and similarity >= occ.reacquire_threshold:
+                self._reacquire_hits += 1
+                if self._reacquire_hits >= occ.reacquire_frames:
+                    self._state = TrackState.TRACKING
+                    self._occluded_frames = 0
+                    self._lost_frames = 0
+                    self._reacquire_hits = 0
+            else:
+                self._reacquire_hits = 0
+            return
+        if similarity >= occ.similarity_threshold:
+            self._state = TrackState.TRACKING
+            self._occluded_frames = 0
+            return
+        # seed occlusion handler: no resampling, count, give up after max_frames
+        self._occluded_frames += 1
+        self._state = (
+            TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
+        )
+
+    def _resample(self) -> None:
+        n = self._config.num_particles
+        idx = weighted_resample(self._weights, self._config.resampling, self._rng)
+        self._particles = self._particles[idx]
+        self._weights = np.full(n, 1.0 / n)
+        self.resampled = True
+
+    def _relock(self, box: FloatArray) -> None:
+        """Back from LOST at `box`: the coasting history says nothing about the target now."""
+        self._box = box.copy()
+        self._velocity = np.zeros(2)
+        self._particles[:, [VX, VY]] = 0.0
+        self._centres.clear()
+
+    def _follow(self, frame: Frame, box: FloatArray, *, learn_velocity: bool) -> None:
+        n = self._config.num_particles
+        if effective_sample_size(self._weights) < self._config.resampling.neff_rate * n:
+            self._resample()
+        if learn_velocity and self._confidence >= self._config.occlusion.reacquire_threshold:
+            # learn the velocity only from clean frames: a target sliding behind an occluder
+            # appears to slow down, and coasting on that would leave it behind; and not from
+            # the jump back out of a coast
+            step = box[:2] - self._box[:2]
+            a = _VELOCITY_SMOOTHING
+            self._velocity = (1 - a) * self._velocity + a * step
+        self._box = box
+        self._likelihood.adapt(frame, self._box)
+
+    def _coast(self) -> None:
+        self._velocity = self._velocity * self._config.motion.occluded_velocity_decay
+        self._box[:2] = self._box[:2] + self._velocity
+
+    def _result(self) -> TrackResult:
+        cx, cy, w, h = (float(v) for v in self._box)
+        return TrackResult(
+            box=(cx - w / 2, cy - h / 2, w, h),
+            state=self._state,
+            confidence=float(np.clip(self._confidence, 0.0, 1.0)),
+            velocity=(float(self._velocity[0]), float(self._velocity[1])),
+        )

@@ -1,0 +1,365 @@
+"""SVM + Lucas-Kanade tracker (Sun 2015, seed 004).
+
+A box is described by its RGB 3x3x3 histogram and its uniform rotation-invariant LBP(8,1)
+histogram (37 values, ptzd/vision/features.py). An SVM with the histogram-intersection
+kernel separates the target from its background; Platt scaling (seed eqs. 5-7) turns its
+decision value into P(target | box), the particle weight (eq. 8) of a learned particle
+filter whose estimate is the probability-weighted mean (eq. 9).
+
+The loop (seed Fig. 5): Lucas-Kanade affine template tracking (inverse compositional,
+eq. 10) while its variance-normalised SSD error stays under h1; above it the particle filter
+takes over until the tracked patch's confidence exceeds h2, when LK restarts from a fresh
+template. Patches tracked with error < h1 or confidence > h2 - and confidence > h2 - join
+the positives; after 15 new ones the SVM is retrained (with fresh background negatives).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from enum import StrEnum
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from sklearn.svm import SVC
+
+from ptzd.vision.config import SvmConfig, TrackerConfig
+from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
+from ptzd.vision.likelihood import FloatArray, Frame
+from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix
+from ptzd.vision.rf import sample_negatives
+from ptzd.vision.tracking import Box, TrackResult, TrackState
+
+_MIN_SIZE = 4.0
+# LK template = the box grown by this factor (context around the target; ours).
+_LK_MARGIN = 1.3
+
+
+class Mode(StrEnum):
+    LK = "lk"
+    PF = "pf"
+
+
+def intersection_kernel(a: FloatArray, b: FloatArray) -> FloatArray:
+    """K(a_i, b_j) = sum_d min(a_id, b_jd): the histogram-intersection kernel, len(a) x len(b)."""
+    k: FloatArray = np.minimum(a[:, None, :], b[None, :, :]).sum(axis=2)
+    return k
+
+
+def _platt_objective(f: FloatArray, t: FloatArray, a: float, b: float) -> float:
+    z = f * a + b
+    # -sum t log p + (1 - t) log(1 - p) with p = 1 / (1 + exp(z)), without overflow
+    return float(
+        np.sum(np.where(z >= 0, t * z + np.log1p(np.exp(-z)), (t - 1) * z + np.log1p(np.exp(z))))
+    )
+
+
+def platt_fit(decision: FloatArray, labels: NDArray[np.bool_]) -> tuple[float, float]:
+    """(A, B) of P(y=1|f) = 1 / (1 + exp(A f + B)) (seed eqs. 5-7).
+
+    Targets are Platt's regularised t+ = (N+ + 1) / (N+ + 2), t- = 1 / (N- + 2); the fit is
+    Newton's method with backtracking line search (Lin, Lin and Weng 2007).
+    """
+    n_pos = float(labels.sum())
+    n_neg = float(labels.size - n_pos)
+    t = np.where(labels, (n_pos + 1) / (n_pos + 2), 1 / (n_neg + 2))
+    a, b = 0.0, float(np.log((n_neg + 1) / (n_pos + 1)))
+    value = _platt_objective(decision, t, a, b)
+    for _ in range(100):
+        z = decision * a + b
+        p = np.where(z >= 0, np.exp(-z) / (1 + np.exp(-z)), 1 / (1 + np.exp(z)))
+        d1 = t - p
+        d2 = p * (1 - p)
+        g1, g2 = float(np.sum(decision * d1)), float(np.sum(d1))
+        if abs(g1) < 1e-5 and abs(g2) < 1e-5:
+            break
+        h11 = float(np.sum(decision * decision * d2)) + 1e-12
+        h22 = float(np.sum(d2)) + 1e-12
+        h21 = float(np.sum(decision * d2))
+        det = h11 * h22 - h21 * h21
+        da = -(h22 * g1 - h21 * g2) / det
+        db = -(-h21 * g1 + h11 * g2) / det
+        slope = g1 * da + g2 * db
+        step = 1.0
+        while step >= 1e-10:
+            new_value = _platt_objective(decision, t, a + step * da, b + step * db)
+            if new_value < value + 1e-4 * step * slope:
+                a, b, value = a + step * da, b + step * db, new_value
+                break
+            step /= 2
+        else:
+            break
+    return a, b
+
+
+def platt_probability(decision: FloatArray, a: float, b: float) -> FloatArray:
+    z = decision * a + b
+    p: FloatArray = np.where(z >= 0, np.exp(-z) / (1 + np.exp(-z)), 1 / (1 + np.exp(z)))
+    return p
+
+
+class SvmModel:
+    """Intersection-kernel SVM with Platt-scaled outputs."""
+
+    def __init__(self, c: float) -> None:
+        self._c = c
+        self._support: FloatArray = np.zeros((0, 37))
+        self._dual: FloatArray = np.zeros(0)
+        self._intercept = 0.0
+        self.platt = (0.0, 0.0)
+
+    def fit(self, x: FloatArray, y: NDArray[np.bool_]) -> None:
+        svc = SVC(C=self._c, kernel="precomputed")
+        svc.fit(intersection_kernel(x, x), y.astype(int))
+        self._support = x[svc.support_]
+        self._dual = svc.dual_coef_[0].astype(np.float64)
+        self._intercept = float(svc.intercept_[0])
+        self.platt = platt_fit(self.decision(x), y)
+
+    def decision(self, x: FloatArray) -> FloatArray:
+        """Signed distance-like SVM output, > 0 on the target side."""
+        out: FloatArray = intersection_kernel(x, self._support) @ self._dual + self._intercept
+        return out
+
+    def probability(self, x: FloatArray) -> FloatArray:
+        return platt_probability(self.decision(x), *self.platt)
+
+
+class LucasKanade:
+    """Inverse-compositional affine Lucas-Kanade on a small grey template (seed eq. 10)."""
+
+    def __init__(self, size: int, iterations: int) -> None:
+        self._size = size
+        self._iterations = iterations
+        self._template: FloatArray = np.zeros((1, 1))
+        self._sd: FloatArray = np.zeros((1, 6))
+        self._hessian_inv: FloatArray = np.eye(6)
+        self.warp: FloatArray = np.eye(3)  # template coordinates -> image pixels
+        self._variance = 1.0
+
+    def set_template(self, grey: NDArray[np.uint8], box: FloatArray) -> None:
+        # the template takes a margin of context: a flat target's own silhouette edges are
+        # what LK aligns, and they must lie inside the template
+        cx, cy = box[:2]
+        w, h = box[2:] * _LK_MARGIN
+        scale = self._size / max(w, h)
+        tw, th = max(4, round(w * scale)), max(4, round(h * scale))
+        self.warp = np.array(
+            [[w / tw, 0.0, cx - w / 2], [0.0, h / th, cy - h / 2], [0.0, 0.0, 1.0]]
+        )
+        self._template = self._sample(grey, (tw, th))
+        gy, gx = (np.asarray(g, dtype=np.float64) for g in np.gradient(self._template))
+        v, u = np.mgrid[0:th, 0:tw].astype(np.float64)
+        gx, gy, u, v = gx.ravel(), gy.ravel(), u.ravel(), v.ravel()
+        self._sd = np.column_stack([gx * u, gy * u, gx * v, gy * v, gx, gy])
+        hessian = self._sd.T @ self._sd + np.eye(6) * 1e-6
+        self._hessian_inv = np.asarray(np.linalg.inv(hessian), dtype=np.float64)
+        self._variance = max(float(self._template.var()), 1.0)
+
+    def _sample(self, grey: NDArray[np.uint8], size: tuple[int, int]) -> FloatArray:
+        patch = cv2.warpAffine(
+            grey,
+            self.warp[:2],
+            size,
+            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+        # smoothing widens the basin of convergence on flat, sharp-edged targets
+        return np.asarray(cv2.GaussianBlur(patch.astype(np.float64), (5, 5), 1.5), np.float64)
+
+    def track(self, grey: NDArray[np.uint8]) -> float:
+        """Align the template to `grey`; returns the error mean(residual^2) / var(template)."""
+        th, tw = self._template.shape
+        residual = np.zeros(1)
+        for _ in range(self._iterations):
+            residual = (self._sample(grey, (tw, th)) - self._template).ravel()
+            dp = self._hessian_inv @ (self._sd.T @ residual)
+            delta = np.array([[1 + dp[0], dp[2], dp[4]], [dp[1], 1 + dp[3], dp[5]], [0, 0, 1.0]])
+            self.warp = self.warp @ np.linalg.inv(delta)
+            if float(np.abs(dp[4:]).max()) < 0.01 and float(np.abs(dp[:4]).max()) < 1e-4:
+                break
+        residual = (self._sample(grey, (tw, th)) - self._template).ravel()
+        return float(np.mean(residual * residual)) / self._variance
+
+    def box(self) -> FloatArray:
+        """The axis-aligned (cx, cy, w, h) of the warped template."""
+        th, tw = self._template.shape
+        corners = np.array([[0, 0, 1], [tw, 0, 1], [0, th, 1], [tw, th, 1.0]]) @ self.warp.T
+        lo, hi = corners[:, :2].min(axis=0), corners[:, :2].max(axis=0)
+        size = (hi - lo) / _LK_MARGIN
+        return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, size[0], size[1]])
+
+
+class SvmTracker:
+    """A `Tracker`: LK template tracking, falling back to the SVM particle filter."""
+
+    def __init__(self, config: TrackerConfig) -> None:
+        self._config = config
+        self._svm_config: SvmConfig = config.svm
+        self.model = SvmModel(config.svm.svm_c)
+        self.lk = LucasKanade(config.svm.template_size, config.svm.lk_iterations)
+        self._rng = np.random.default_rng(config.seed)
+        self._box: FloatArray = np.zeros(4)
+        self._reference: FloatArray = np.ones(2)  # init (w, h), rescaled on zoom
+        self._velocity: FloatArray = np.zeros(2)
+        self._particles: FloatArray = np.zeros((config.svm.num_particles, 4))
+        self.positives: deque[FloatArray] = deque(maxlen=config.svm.positives)
+        self.new_positives = 0
+        self.retrains = 0
+        self.mode = Mode.LK
+        self.lk_error = 0.0
+        self._state = TrackState.LOST
+        self._confidence = 0.0
+        self._occluded = 0
+        self._initialised = False
+
+    @property
+    def state(self) -> TrackState:
+        return self._state
+
+    def _features(self, bgr: NDArray[np.uint8], boxes: FloatArray) -> FloatArray:
+        maps = ColourTextureMaps(bgr, region_of(boxes, bgr.shape), self._svm_config.grid)
+        return maps.histograms(boxes)
+
+    def init(self, frame: Frame, box: Box) -> None:
+        x, y, w, h = (float(v) for v in box)
+        if not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0:
+            raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+        cfg = self._svm_config
+        self._rng = np.random.default_rng(self._config.seed)
+        self._box = np.array([x + w / 2, y + h / 2, w, h])
+        self._reference = np.array([w, h])
+        bgr = to_bgr(frame)
+        # seed Fig. 3: positives are the boxes closest to the init box
+        near = self._jitter(self._box, cfg.positives - 1, 0.05, 0.03)
+        pos = self._features(bgr, np.vstack([self._box[None], near]))
+        self.positives = deque(pos, maxlen=cfg.positives)
+        self._retrain(bgr)
+        self.retrains = 0
+        self.lk.set_template(to_grey(frame), self._box)
+        self.mode = Mode.LK
+        self._velocity = np.zeros(2)
+        self._state = TrackState.TRACKING
+        self._confidence = 1.0
+        self._occluded = 0
+        self._initialised = True
+
+    def _jitter(self, box: FloatArray, count: int, shift: float, scale: float) -> FloatArray:
+        noise = self._rng.standard_normal((count, 3))
+        out = np.tile(box, (count, 1))
+        out[:, :2] += noise[:, :2] * shift * box[2:]
+        out[:, 2:] *= np.exp(noise[:, 2:3] * scale)
+        np.maximum(out[:, 2:], _MIN_SIZE, out=out[:, 2:])
+        return out
+
+    def _retrain(self, bgr: NDArray[np.uint8]) -> None:
+        cfg = self._svm_config
+        negatives = sample_negatives(self._box, cfg.negatives, 2.0, bgr.shape, self._rng)
+        neg = self._features(bgr, negatives)
+        pos = np.array(self.positives)
+        x = np.vstack([pos, neg])
+        y = np.zeros(x.shape[0], bool)
+        y[: pos.shape[0]] = True
+        self.model.fit(x, y)
+        self.new_positives = 0
+        self.retrains += 1
+
+    def update(self, frame: Frame, ego_motion: NDArray[np.float64] | None = None) -> TrackResult:
+        if not self._initialised:
+            raise RuntimeError("init() the tracker before update()")
+        cfg = self._svm_config
+        if ego_motion is not None:
+            self._apply(ego_motion_matrix(ego_motion))
+        bgr, grey = to_bgr(frame), to_grey(frame)
+        previous = self._box.copy()
+        if self.mode is Mode.LK:
+            self.lk_error = self.lk.track(grey)
+            box = self.lk.box()
+            if self.lk_error > cfg.lk_error or not self._sane(box, frame.shape):
+                self.mode = Mode.PF
+                self._particles = self._jitter(self._box, cfg.num_particles, cfg.sigma_xy, 0.0)
+        if self.mode is Mode.LK:
+            confidence = float(self.model.probability(self._features(bgr, box[None]))[0])
+        else:
+            box, confidence = self._particle_step(bgr)
+        self._confidence = confidence
+        if confidence >= cfg.occluded_below:
+            self._box = box
+            self._occluded = 0
+            self._state = TrackState.TRACKING
+        else:
+            self._occluded += 1
+            self._state = (
+                TrackState.LOST if self._occluded >= cfg.max_occluded else TrackState.OCCLUDED
+            )
+        if confidence > cfg.confidence:
+            # step 7: a confident patch joins the positives; LK resumes from it
+            if self.mode is Mode.PF:
+                self.mode = Mode.LK
+                self.lk.set_template(grey, self._box)
+            elif self.lk_error < cfg.lk_error:
+                self.lk.set_template(grey, self._box)  # template update on confident frames
+            self.positives.append(self._features(bgr, self._box[None])[0])
+            self.new_positives += 1
+            if self.new_positives >= cfg.retrain_after:
+                self._retrain(bgr)
+        self._velocity = self._box[:2] - previous[:2]
+        return self._result()
+
+    def _sane(self, box: FloatArray, shape: tuple[int, ...]) -> bool:
+        """LK's box is plausible: finite, in the frame, size within 2x of the last box."""
+        if not np.all(np.isfinite(box)):
+            return False
+        ratio = box[2:] / self._reference
+        inside = 0 <= box[0] < shape[1] and 0 <= box[1] < shape[0]
+        return bool(inside and np.all(ratio > 0.5) and np.all(ratio < 2.0))
+
+    def _particle_step(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float]:
+        """One learned-PF step (seed eqs. 8-9): diffuse, weigh by P(target), resample."""
+        cfg = self._svm_config
+        p = self._particles
+        n = p.shape[0]
+        noise = self._rng.standard_normal((n, 3))
+        p[:, :2] += noise[:, :2] * cfg.sigma_xy * self._box[2:]
+        p[:, 2:] *= np.exp(noise[:, 2:3] * cfg.sigma_scale)
+        p[:, 0] = np.clip(p[:, 0], 0, bgr.shape[1] - 1)
+        p[:, 1] = np.clip(p[:, 1], 0, bgr.shape[0] - 1)
+        # one scale per particle: the init box's aspect, within 0.5..2 of its size
+        ref_w, ref_h = self._reference
+        p[:, 2] = np.clip(p[:, 2], 0.5 * ref_w, 2.0 * ref_w)
+        p[:, 3] = p[:, 2] * (ref_h / ref_w)
+        prob = self.model.probability(self._features(bgr, p))
+        total = float(prob.sum())
+        weights = prob / total if total > 0 else np.full(n, 1.0 / n)
+        estimate: FloatArray = weights @ p
+        confidence = float(self.model.probability(self._features(bgr, estimate[None]))[0])
+        self._particles = p[self._rng.choice(n, size=n, p=weights)]
+        return estimate, confidence
+
+    def rescale(self, factor: float, center: tuple[float, float]) -> None:
+        if not factor > 0 or not np.isfinite(factor):
+            raise ValueError(f"rescale factor must be positive, got {factor}")
+        cx, cy = center
+        self._apply(
+            np.array(
+                [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1]]
+            )
+        )
+
+    def _apply(self, homography: FloatArray) -> None:
+        zeros = np.zeros((self._particles.shape[0], 2))
+        self._particles, _ = apply_homography(homography, self._particles, zeros)
+        box, vel = apply_homography(homography, self._box[None], self._velocity[None])
+        old_size = self._box[2:].copy()
+        self._box, self._velocity = box[0], vel[0]
+        self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
+        self.lk.warp = homography @ self.lk.warp
+
+    def _result(self) -> TrackResult:
+        cx, cy, w, h = (float(v) for v in self._box)
+        return TrackResult(
+            box=(cx - w / 2, cy - h / 2, w, h),
+            state=self._state,
+            confidence=float(np.clip(self._confidence, 0.0, 1.0)),
+            velocity=(float(self._velocity[0]), float(self._velocity[1])),
+        )

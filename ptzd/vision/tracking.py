@@ -1,0 +1,76 @@
+"""The tracker API the daemon and `ptzd track` use.
+
+Boxes are `(x, y, w, h)` in pixels of the frame passed to `update`, `x, y` the top-left
+corner. A tracker is not thread-safe; one worker owns it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ptzd.vision.config import TrackerConfig
+
+Box = tuple[float, float, float, float]
+
+
+class TrackState(StrEnum):
+    """What the tracker believes about its target this frame."""
+
+    TRACKING = "tracking"
+    OCCLUDED = "occluded"  # similarity below the threshold: coasting, model frozen
+    LOST = "lost"  # occluded for too long (or never initialised); box is the last guess
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """One frame's answer: box (x, y, w, h), state, confidence in 0..1, velocity px/frame."""
+
+    box: Box
+    state: TrackState
+    confidence: float
+    velocity: tuple[float, float]
+
+
+class Tracker(Protocol):
+    """A single-target tracker."""
+
+    def init(self, frame: NDArray[np.uint8], box: Box) -> None:
+        """Start tracking the target inside `box` of `frame` (BGR, HxWx3)."""
+        ...
+
+    def update(
+        self, frame: NDArray[np.uint8], ego_motion: NDArray[np.float64] | None = None
+    ) -> TrackResult:
+        """Track into the next frame.
+
+        `ego_motion` maps previous-frame pixels to this frame's pixels: a shift `(dx, dy)`
+        or a 3x3 homography. It is applied in the prediction step.
+        """
+        ...
+
+    def rescale(self, factor: float, center: tuple[float, float]) -> None:
+        """The image scale changed by `factor` about `center` (a zoom step)."""
+        ...
+
+
+def make_tracker(config: TrackerConfig) -> Tracker:
+    """The tracker `config.kind` names."""
+    from ptzd.vision.color import ColorLikelihood
+    from ptzd.vision.particle_filter import ParticleTracker
+
+    if config.kind == "color":
+        return ParticleTracker(config, ColorLikelihood(config.color, config.gmm))
+    if config.kind == "rf":
+        from ptzd.vision.rf import RfTracker
+
+        return RfTracker(config)
+    if config.kind == "svm":
+        from ptzd.vision.svm import SvmTracker
+
+        return SvmTracker(config)
+    raise ValueError(f"unknown tracker kind {config.kind!r}")  # pragma: no cover - Literal

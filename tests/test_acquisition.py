@@ -1,0 +1,205 @@
+"""Acquisition state machine on a virtual clock: lock, policy, occlusion, loss, home, static."""
+
+from __future__ import annotations
+
+import pytest
+
+from ptzd.vision.acquisition import AcqState, Acquirer, Decision, TrackResult, Transition
+from ptzd.vision.acquisition_config import AcquisitionConfig
+from ptzd.vision.detect.types import Detection
+
+SIZE = (640, 480)
+DT = 0.1  # 10 frames per second
+
+
+def det(x: float, y: float, w: float = 30, h: float = 80) -> Detection:
+    return Detection(x, y, w, h, 0.9)
+
+
+class Run:
+    """Drives an Acquirer frame by frame on a virtual clock."""
+
+    def __init__(self, **overrides: object) -> None:
+        self.config = AcquisitionConfig.model_validate(overrides)
+        self.events: list[Transition] = []
+        self.acq = Acquirer(self.config, SIZE, on_transition=self.events.append)
+        self.now = 0.0
+
+    def step(
+        self,
+        detections: list[Detection] | None,
+        track: TrackResult | None = None,
+        *,
+        moving: bool = False,
+    ) -> Decision:
+        self.now = round(self.now + DT, 6)
+        return self.acq.update(self.now, detections, track, camera_moving=moving)
+
+    def lock(self, box: Detection) -> Decision:
+        for _ in range(self.config.persist_frames):
+            decision = self.step([box])
+        assert decision.state is AcqState.TRACKING
+        return decision
+
+
+def test_candidate_must_persist_before_lock_and_locks_within_a_second() -> None:
+    run = Run(persist_frames=3)
+    person = det(100, 100)
+    assert run.step([person]).state is AcqState.SEARCHING
+    assert run.step([det(103, 101)]).state is AcqState.SEARCHING
+    decision = run.step([det(106, 102)])
+    assert decision.state is AcqState.TRACKING
+    assert decision.lock_box == (106.0, 102.0, 30.0, 80.0)
+    assert run.now <= 1.0
+    assert [(e.previous, e.state, e.reason) for e in run.events] == [
+        (AcqState.SEARCHING, AcqState.TRACKING, "acquired")
+    ]
+    assert decision.transitions[0].to_dict()["bbox"] == [106.0, 102.0, 30.0, 80.0]
+
+
+def test_a_flicker_does_not_lock() -> None:
+    run = Run(persist_frames=3, max_candidate_misses=0)
+    run.step([det(100, 100)])
+    run.step([])
+    run.step([det(100, 100)])
+    assert run.step([]).state is AcqState.SEARCHING
+
+
+@pytest.mark.parametrize(
+    ("overrides", "expected_x"),
+    [
+        ({"policy": "largest"}, 500),
+        ({"policy": "center"}, 300),
+        ({"policy": "zone", "zone": (0.0, 0.0, 0.3, 1.0)}, 20),
+    ],
+)
+def test_policy_chooses_the_target(overrides: dict[str, object], expected_x: float) -> None:
+    run = Run(**overrides)
+    people = [det(20, 100), det(300, 200, 30, 80), det(500, 50, 60, 160)]
+    for _ in range(3):
+        decision = run.step(people)
+    assert decision.lock_box is not None and decision.lock_box[0] == expected_x
+
+
+def test_zone_policy_needs_a_zone() -> None:
+    with pytest.raises(ValueError, match="zone"):
+        AcquisitionConfig(policy="zone")
+    with pytest.raises(ValueError, match="fractions"):
+        AcquisitionConfig(zone=(0.5, 0.0, 0.2, 1.0))
+
+
+def test_occlusion_recovery_then_loss_home_and_search() -> None:
+    run = Run(occluded_timeout_s=1.0, lost_timeout_s=2.0, home_settle_s=1.0)
+    run.lock(det(100, 100))
+    assert run.step(None, TrackResult((101, 100, 30, 80))).state is AcqState.TRACKING
+    assert run.step(None, TrackResult((102, 100, 30, 80), occluded=True)).state is AcqState.OCCLUDED
+    assert run.step(None, TrackResult((103, 100, 30, 80))).state is AcqState.TRACKING
+    # occluded for good: lost after 1 s, home after 2 s more, searching after settling
+    states = []
+    go_home = []
+    for _ in range(60):
+        decision = run.step([], TrackResult(None))
+        states.append(decision.state)
+        go_home.append(decision.go_home)
+    assert states[9] is AcqState.OCCLUDED and states[10] is AcqState.LOST
+    assert AcqState.RETURNING_HOME in states and states[-1] is AcqState.SEARCHING
+    assert sum(go_home) == 1  # an edge, not a level
+    assert states.index(AcqState.RETURNING_HOME) == 30
+    assert states.index(AcqState.SEARCHING) == 40
+    reasons = [e.reason for e in run.events]
+    assert reasons == [
+        "acquired",
+        "occluded",
+        "recovered",
+        "track_lost",
+        "occlusion_timeout",
+        "lost_timeout",
+        "home_reached",
+    ]
+
+
+def test_without_return_home_lost_goes_back_to_searching() -> None:
+    run = Run(occluded_timeout_s=0.5, lost_timeout_s=0.5, return_home=False)
+    run.lock(det(100, 100))
+    decisions = [run.step([], TrackResult(None)) for _ in range(15)]
+    assert decisions[-1].state is AcqState.SEARCHING
+    assert not any(d.go_home for d in decisions)
+
+
+def test_reidentified_after_occlusion_by_a_detection_near_the_last_box() -> None:
+    run = Run()
+    run.lock(det(100, 100))
+    run.step(None, TrackResult((110, 100, 30, 80)))
+    assert run.step([], TrackResult(None)).state is AcqState.OCCLUDED
+    # someone far away does not count as the target
+    assert run.step([det(500, 300)], TrackResult(None)).state is AcqState.OCCLUDED
+    decision = run.step([det(135, 102), det(500, 300)], TrackResult(None))
+    assert decision.state is AcqState.TRACKING
+    assert decision.lock_box == (135.0, 102.0, 30.0, 80.0)
+    assert run.events[-1].reason == "reidentified"
+
+
+def test_static_target_is_dropped_and_ignored() -> None:
+    run = Run(static_s=3.0, ignore_static_s=20.0, revalidate_s=1.0)
+    car = det(200, 200, 40, 90)
+    run.lock(car)
+    still = TrackResult(car.box)
+    states = []
+    for _ in range(40):
+        # re-detection runs when asked but finds nothing moving there
+        detections: list[Detection] | None = [] if run.acq.wants_detection(run.now + DT) else None
+        states.append(run.step(detections, still).state)
+    assert AcqState.SEARCHING in states
+    assert run.events[-1].reason == "static"
+    # the same spot keeps being "detected" (e.g. a person-shaped sign): not locked again
+    for _ in range(10):
+        assert run.step([car]).state is AcqState.SEARCHING
+
+
+def test_confirmed_still_person_is_kept() -> None:
+    run = Run(static_s=3.0)
+    person = det(200, 200)
+    run.lock(person)
+    for _ in range(60):
+        decision = run.step([person], TrackResult(person.box))
+    assert decision.state is AcqState.TRACKING
+
+
+def test_camera_motion_is_not_mistaken_for_a_static_target() -> None:
+    run = Run(static_s=2.0)
+    run.lock(det(300, 200))
+    for _ in range(50):  # the dome follows: the box stays centred in the view
+        decision = run.step(None, TrackResult((300, 200, 30, 80)), moving=True)
+    assert decision.state is AcqState.TRACKING
+
+
+def test_minimum_time_before_switching_targets() -> None:
+    run = Run(min_switch_s=2.0, switch_margin=1.5)
+    small = det(100, 100, 20, 50)
+    run.lock(small)
+    big = det(400, 100, 60, 160)
+    switched_at = None
+    for i in range(40):
+        decision = run.step([small, big], TrackResult(small.box))
+        if decision.lock_box == big.box:
+            switched_at = i
+            break
+    assert switched_at is not None
+    assert run.now - 0.3 >= 2.0  # not before min_switch_s after the lock at t=0.3
+    assert run.events[-1].reason == "switched"
+
+
+def test_periodic_redetection_while_tracking() -> None:
+    run = Run(revalidate_s=1.0)
+    assert run.acq.wants_detection(0.0)
+    run.lock(det(100, 100))
+    t_lock = run.now
+    assert not run.acq.wants_detection(t_lock + 0.5)
+    assert run.acq.wants_detection(t_lock + 1.0)
+
+
+def test_reset_returns_to_searching() -> None:
+    run = Run()
+    run.lock(det(100, 100))
+    decision = run.acq.reset(run.now)
+    assert decision.state is AcqState.SEARCHING and run.events[-1].reason == "reset"

@@ -1,0 +1,62 @@
+"""The annotation helper (bench/annotate.py) on synthetic foreground masks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.annotate import Spec, follow, foreground
+
+
+def _mask(boxes: list[tuple[int, int, int, int]]) -> np.ndarray:
+    mask = np.zeros((200, 300), np.uint8)
+    for x, y, w, h in boxes:
+        mask[y : y + h, x : x + w] = 255
+    return mask
+
+
+def test_follows_a_moving_silhouette_exactly() -> None:
+    masks = {f: _mask([(20 + 5 * f, 50, 20, 60)]) for f in range(10)}
+    spec = Spec("v", 1, 0, 9, {0: (20.0, 50.0, 20.0, 60.0)}, [])
+    boxes, source = follow(spec, masks)
+    assert boxes[9] == (65.0, 50.0, 20.0, 60.0)
+    assert set(source.values()) == {"key", "auto"}
+
+
+def test_a_merged_silhouette_is_unsure_and_coasts() -> None:
+    # frames 0-4 alone; from frame 5 another person touches it on the right: one silhouette
+    # 2.5x as wide as the target
+    masks = {f: _mask([(20 + 5 * f, 50, 20, 60)] + ([(40 + 5 * f, 50, 30, 60)] if f >= 5 else []))
+             for f in range(8)}  # fmt: skip
+    spec = Spec("v", 1, 0, 7, {0: (20.0, 50.0, 20.0, 60.0)}, [])
+    boxes, source = follow(spec, masks)
+    assert [source[f] for f in range(5, 8)] == ["unsure"] * 3
+    # coasting at the followed velocity (5 px/frame) with the target's own size
+    assert boxes[7][2:] == (20.0, 60.0)
+    assert abs(boxes[7][0] - 55.0) < 2.0
+
+
+def test_a_separate_passer_by_is_ignored() -> None:
+    masks = {f: _mask([(20 + 5 * f, 50, 20, 60), (45 + 5 * f, 50, 30, 60)]) for f in range(8)}
+    spec = Spec("v", 1, 0, 7, {0: (20.0, 50.0, 20.0, 60.0)}, [])
+    boxes, source = follow(spec, masks)
+    assert boxes[7] == (55.0, 50.0, 20.0, 60.0)
+    assert source[7] == "auto"
+
+
+def test_keys_override_and_interpolate_linearly() -> None:
+    masks = {f: _mask([]) for f in range(11)}  # no foreground at all: only keys count
+    spec = Spec(
+        "v", 1, 0, 10, {0: (0.0, 0.0, 10.0, 20.0), 10: (100.0, 50.0, 20.0, 40.0)}, [(0, 10)]
+    )
+    boxes, source = follow(spec, masks)
+    assert boxes[5] == (50.0, 25.0, 15.0, 30.0)
+    assert source[5] == "interp" and source[10] == "key"
+
+
+def test_foreground_marks_changed_pixels_only() -> None:
+    background = np.full((60, 80, 3), 100, np.uint8)
+    frame = background.copy()
+    frame[10:40, 20:35] = (100, 100, 200)  # red channel differs by 100
+    frame[50:52, 70:72] = 120  # a 2x2 speck of noise below the threshold
+    mask = foreground(frame, background)
+    assert mask[25, 27] == 255 and mask[5, 5] == 0 and mask[51, 71] == 0

@@ -1,0 +1,57 @@
+"""The closed loop on the virtual clock: simulated dome + daemon over a real pty."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ptzd.closed_loop import ClosedLoopOptions, run_closed_loop
+from ptzd.config import validate_config
+
+pytest.importorskip("ptzd.sim.scene", reason="the synthetic scene is not available")
+
+
+async def _run(record: Path, seed: int = 0, duration: float = 4.0) -> dict[str, object]:
+    options = ClosedLoopOptions(
+        config=validate_config({}, environ={}),
+        spec=f"synthetic:{seed}",
+        duration=duration,
+        record=record,
+        virtual=True,
+    )
+    return await run_closed_loop(options)
+
+
+@pytest.mark.slow
+async def test_virtual_closed_loop_keeps_the_walker_centred_and_is_deterministic(
+    tmp_path: Path,
+) -> None:
+    # Two runs only: building the synthetic scene's ground truth dominates the cost.
+    report = await _run(tmp_path / "a")
+    again = await _run(tmp_path / "b")
+    for name in ("camera.jsonl", "serial.jsonl", "track.jsonl"):
+        assert (tmp_path / "a" / name).read_text() == (tmp_path / "b" / name).read_text(), name
+    assert again["centred_fraction"] == report["centred_fraction"]
+
+    assert report["frames_scored"] == report["frames_rendered"]
+    assert isinstance(report["frames_rendered"], int) and report["frames_rendered"] > 50
+    assert report["track_lost_frames"] == 0
+    assert report["in_view_fraction"] == 1.0
+    centred = report["centred_fraction"]
+    assert isinstance(centred, float) and centred >= 0.9
+    assert report["serial_frames_received"] == report["link_frames_sent"]  # every frame arrived
+    assert report["bad_checksums"] == 0
+    for name in ("camera.jsonl", "serial.jsonl", "track.jsonl", "report.json", "report.png"):
+        assert (tmp_path / "a" / name).stat().st_size > 0, name
+    camera = (tmp_path / "a" / "camera.jsonl").read_text().splitlines()
+    assert len(camera) == report["frames_rendered"]
+    first = json.loads(camera[0])
+    assert set(first) == {"t", "video_frame", "pan", "tilt", "hfov", "width", "height"}
+    # the dome moved (it followed the walker) and the last thing on the wire is STOP
+    pans = {json.loads(line)["pan"] for line in camera}
+    assert len(pans) > 1
+    serial_lines = (tmp_path / "a" / "serial.jsonl").read_text().splitlines()
+    motions = [s for s in map(json.loads, serial_lines) if s["command"] == "Motion"]
+    assert motions[-1]["pan"] == 0 and motions[-1]["tilt"] == 0 and motions[-1]["zoom"] == "none"

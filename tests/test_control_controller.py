@@ -1,0 +1,119 @@
+"""PtzController: regions to directions, staleness, lost policy, zoom pulses, FOV gain, latency."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ptzd.control.config import ControlConfig, LostConfig, ZoomConfig
+from ptzd.control.controller import STOP, PtzController, TrackInput
+from ptzd.control.zoom import Box
+from ptzd.pelco.codec import Motion, Preset, PresetAction, Zoom
+from ptzd.vision.tracking import TrackState
+
+SIZE = (640, 480)
+TARGET = Box(300, 180, 40, 120)  # centred, the desired size
+
+
+def _track(box: Box, t: float, *, state: TrackState = TrackState.TRACKING,
+           velocity: tuple[float, float] = (0.0, 0.0)) -> TrackInput:  # fmt: skip
+    return TrackInput(box, velocity, state, 0.9, t)
+
+
+def _controller(**overrides: object) -> PtzController:
+    ctl = PtzController(ControlConfig.model_validate(overrides), SIZE)
+    ctl.acquire(TARGET)
+    return ctl
+
+
+def test_directions_follow_the_nine_regions() -> None:
+    ctl = _controller()
+    right_low = Box(560, 380, 40, 90)  # right of and below the centre
+    decision = ctl.update(_track(right_low, 0.0), now=0.0, hfov=60.0)
+    assert decision.mode == "track"
+    assert decision.region is not None and decision.region.index == 8
+    assert decision.motion.pan > 0  # pan right
+    assert decision.motion.tilt < 0  # tilt down
+    ctl = _controller()
+    left_high = Box(20, 10, 40, 90)
+    motion = ctl.update(_track(left_high, 0.0), now=0.0, hfov=60.0).motion
+    assert motion.pan < 0 and motion.tilt > 0
+
+
+def test_stop_region_gives_stop() -> None:
+    ctl = _controller()
+    decision = ctl.update(_track(Box(310, 190, 40, 110), 0.0), now=0.0, hfov=60.0)
+    assert decision.motion == STOP
+    assert decision.region is not None and decision.region.is_stop
+
+
+def test_a_stale_track_never_moves_the_camera() -> None:
+    ctl = _controller(max_track_age_s=0.3)
+    far_right = Box(600, 180, 40, 120)
+    assert ctl.update(_track(far_right, 0.0), now=0.1, hfov=60.0).motion.pan > 0
+    for now in (0.31, 0.5, 2.0, 60.0):
+        decision = ctl.update(_track(far_right, 0.0), now=now, hfov=60.0)
+        assert decision.motion == STOP and decision.mode == "stale"
+    assert ctl.update(None, now=61.0, hfov=60.0).motion == STOP
+
+
+def test_lost_stops_holds_then_goes_home_once() -> None:
+    ctl = _controller(lost=LostConfig(hold_s=2.0, home_preset=7))
+    decisions = [
+        ctl.update(_track(TARGET, t, state=TrackState.LOST), now=t, hfov=60.0)
+        for t in (0.0, 1.0, 1.9)
+    ]
+    assert all(d.motion == STOP and d.preset is None and d.mode == "lost" for d in decisions)
+    home = ctl.update(_track(TARGET, 2.1, state=TrackState.LOST), now=2.1, hfov=60.0)
+    assert home.mode == "home" and home.preset == Preset(PresetAction.GOTO, 7)
+    again = ctl.update(_track(TARGET, 3.0, state=TrackState.LOST), now=3.0, hfov=60.0)
+    assert again.preset is None and again.motion == STOP
+
+
+def test_occluded_follows_the_coasting_box_without_zooming_or_holds() -> None:
+    occluded_right = _track(Box(600, 180, 20, 60), 0.0, state=TrackState.OCCLUDED)
+    ctl = _controller(zoom=ZoomConfig(confirm_s=0.0))
+    coast = ctl.update(occluded_right, now=0.0, hfov=60.0)
+    assert coast.mode == "coast" and coast.motion.pan > 0
+    assert coast.motion.zoom == Zoom.NONE and coast.zoom_step is None  # small, but no zoom
+    held = _controller(lost=LostConfig(follow_occluded=False)).update(
+        occluded_right, now=0.0, hfov=60.0
+    )
+    assert held.motion == STOP and held.mode == "hold"
+
+
+def test_narrower_fov_turns_slower() -> None:
+    off = Box(520, 180, 40, 120)
+    wide = _controller().update(_track(off, 0.0), now=0.0, hfov=60.0).motion.pan
+    narrow = _controller().update(_track(off, 0.0), now=0.0, hfov=10.0).motion.pan
+    assert wide > narrow > 0
+
+
+def test_latency_compensation_predicts_the_target() -> None:
+    # Centred now, but moving right at 400 px/s and the frame is 0.2 s old: act as if right.
+    ctl = _controller(lead_s=0.0)
+    decision = ctl.update(_track(TARGET, 0.0, velocity=(400.0, 0.0)), now=0.2, hfov=60.0)
+    assert decision.predicted is not None and decision.predicted[0] == pytest.approx(400.0)
+    assert decision.motion.pan > 0
+    still = _controller(lead_s=0.0).update(_track(TARGET, 0.0), now=0.2, hfov=60.0)
+    assert still.motion.pan == 0
+
+
+def test_zoom_step_is_a_timed_pulse_and_counts_a_layer() -> None:
+    ctl = _controller(zoom=ZoomConfig(confirm_s=0.0, min_dwell_s=5.0, log_rate=0.5))
+    small = Box(305, 195, 30, 90)  # 0.75 x desired, centred and still
+    first = ctl.update(_track(small, 0.0), now=0.0, hfov=40.0)
+    assert first.zoom_step is not None and first.motion.zoom == Zoom.IN
+    assert ctl.zoom_layer == 1
+    duration = abs(math.log(first.zoom_step.factor)) / 0.5
+    during = ctl.update(_track(small, duration / 2), now=duration / 2, hfov=40.0)
+    assert during.motion.zoom == Zoom.IN and during.zoom_step is None
+    after = ctl.update(_track(small, duration + 0.01), now=duration + 0.01, hfov=40.0)
+    assert after.motion.zoom == Zoom.NONE and ctl.zoom_layer == 1  # dwell: no second step yet
+
+
+def test_stale_track_aborts_a_zoom_pulse() -> None:
+    ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), max_track_age_s=0.2)
+    assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.0, hfov=40.0).motion.zoom == Zoom.IN
+    assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.3, hfov=40.0).motion == Motion()

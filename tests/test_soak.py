@@ -1,0 +1,94 @@
+"""The soak harness: option checks, /proc sampling, plots, and real (short) soaks.
+
+The CI soak (`-m slow`) runs the three processes for real with all three faults and checks
+the report: clean exit, dome left stopped, no leaks, every fault recovered as documented.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import pytest
+
+from ptzd.errors import UsageError
+from ptzd.soak import FAULTS, SoakOptions, draw_plots, proc_sample
+
+
+def test_options_reject_unknown_faults_and_faults_on_the_virtual_clock(tmp_path: Path) -> None:
+    with pytest.raises(UsageError, match="unknown fault"):
+        SoakOptions(minutes=1, report_dir=tmp_path, faults=("meteor",))
+    with pytest.raises(UsageError, match="virtual-clock"):
+        SoakOptions(minutes=1, report_dir=tmp_path, faults=FAULTS[:1], virtual_clock=True)
+    with pytest.raises(UsageError, match="minutes"):
+        SoakOptions(minutes=0, report_dir=tmp_path)
+
+
+def test_proc_sample_sees_a_new_file_descriptor() -> None:
+    before = proc_sample(os.getpid())
+    fd = os.open(os.devnull, os.O_RDONLY)
+    try:
+        after = proc_sample(os.getpid())
+    finally:
+        os.close(fd)
+    assert after["fds"] == before["fds"] + 1
+    assert 5 < before["rss_mb"] < 10_000
+
+
+def test_plots_draw_every_sampled_series(tmp_path: Path) -> None:
+    samples = [
+        {"t": float(t), "rss_mb": 90 + t / 10, "fds": 11, "tasks": 16, "lag_ms": 0.2,
+         "commands": t * 3, "mqtt_messages": t * 9}
+        for t in range(0, 60, 2)
+    ]  # fmt: skip
+    draw_plots({"samples": samples, "faults": [{"at_s": 30.0}]}, tmp_path / "soak.png")
+    image = cv2.imread(str(tmp_path / "soak.png"))
+    assert image is not None and image.shape[0] == 6 * 150 + 20
+    assert (image[:, :, 2] > 200).sum() > 0 and (image[:, :, 0] < 100).sum() > 0
+
+
+@pytest.mark.slow
+def test_virtual_clock_soak_probes_the_sim_process(tmp_path: Path) -> None:
+    run = subprocess.run(
+        [sys.executable, "-m", "ptzd", "soak", "--virtual-clock", "--minutes", "0.1",
+         "--sample-s", "0.5", "--report", str(tmp_path)],
+        capture_output=True, text=True, timeout=110,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["ok"] and report["summary"]["exit_code"] == 0
+    assert report["summary"]["simulated_s"] >= 6.0  # the 0.1 minutes asked for really ran
+    assert report["summary"]["rss_mb_end"] > 20
+    assert (tmp_path / "soak.png").exists()
+    probe = [json.loads(line) for line in (tmp_path / "probe.jsonl").read_text().splitlines()]
+    assert probe and all(p["tasks"] >= 1 for p in probe if "tasks" in p)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(200)
+def test_ci_soak_with_three_faults(tmp_path: Path) -> None:
+    started = time.monotonic()
+    run = subprocess.run(
+        [sys.executable, "-m", "ptzd", "soak", "--minutes", str(CI_SOAK_MINUTES),
+         "--faults", ",".join(FAULTS), "--warmup-s", "120", "--report", str(tmp_path)],
+        capture_output=True, text=True, timeout=195,
+    )  # fmt: skip
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert run.returncode == 0, json.dumps(
+        {k: report[k] for k in ("checks", "faults", "summary")}, indent=1
+    )
+    assert [f["fault"] for f in report["faults"]] == list(FAULTS)
+    assert all(f["recovered"] for f in report["faults"])
+    summary = report["summary"]
+    assert summary["daemon_exit_code"] == 0 and summary["last_motion_is_stop"]
+    assert summary["rss_growth_mb"] < 5.0
+    assert summary["mqtt_messages"] > 100 and summary["frames"] > 500
+    assert time.monotonic() - started < 195
+
+
+CI_SOAK_MINUTES = 3.0

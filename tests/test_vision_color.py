@@ -1,0 +1,171 @@
+"""Colour likelihood and GMM target model: vectorised histograms, peaks, hand-computed GMM."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from ptzd.vision.color import (
+    ColorLikelihood,
+    background_weights,
+    bhattacharyya,
+    bin_image,
+    box_histograms,
+    kernel_grid,
+    make_luts,
+    pad_bins,
+)
+from ptzd.vision.config import ColorConfig, GmmConfig
+from ptzd.vision.gmm import GmmTargetModel
+from tests.vision_helpers import Scene
+
+
+def _slow_histograms(frame, boxes, config: ColorConfig, parts: int):
+    """Reference: loop over boxes and grid points, quantise each pixel on its own."""
+    luts = make_luts(config)
+    grid = kernel_grid(config.grid_cols, config.grid_rows, config.kernel, parts=parts)
+    m = luts.n_bins
+    height, width = frame.shape[:2]
+    out = np.zeros((len(boxes), parts, m + 1))
+    for n, (cx, cy, w, h) in enumerate(boxes):
+        for r, v in enumerate(grid.v):
+            for c, u in enumerate(grid.u):
+                x = int(np.floor(cx + w * u))
+                y = int(np.floor(cy + h * v))
+                if 0 <= x < width and 0 <= y < height:
+                    pixel = frame[y : y + 1, x : x + 1]
+                    hsv = cv2.cvtColor(pixel, cv2.COLOR_BGR2HSV_FULL)[0, 0].astype(int)
+                    hb = hsv[0] * config.bins_h // 256
+                    sb = hsv[1] * config.bins_s // 256
+                    vb = hsv[2] * config.bins_v // 256
+                    if config.achromatic_collapse:
+                        if sb == 0 or vb == 0:
+                            hb = 0
+                        if vb == 0:
+                            sb = 0
+                    b = (hb * config.bins_s + sb) * config.bins_v + vb
+                else:
+                    b = m
+                out[n, grid.part[r], b] += grid.weights[r, c]
+    return out
+
+
+@pytest.mark.parametrize("parts, collapse", [(1, False), (2, True), (4, True)])
+def test_vectorised_histograms_equal_the_slow_reference(parts: int, collapse: bool) -> None:
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    config = ColorConfig(grid_cols=8, grid_rows=16, parts=parts, achromatic_collapse=collapse)
+    # boxes inside, straddling the edges and fully outside the frame
+    boxes = np.array(
+        [[40.0, 30.0, 20.0, 30.0], [3.0, 5.0, 16.0, 24.0], [78.0, 58.0, 10.0, 12.0], [200, 9, 8, 8]]
+    )
+    luts = make_luts(config)
+    region = frame[0:60, 0:80]
+    grid = kernel_grid(config.grid_cols, config.grid_rows, parts=parts)
+    fast = box_histograms(pad_bins(bin_image(region, luts), 216), (0, 0), boxes, grid, 216)
+    slow = _slow_histograms(frame, boxes, config, parts)
+    np.testing.assert_allclose(fast, slow, atol=1e-12)
+    np.testing.assert_allclose(fast.sum(axis=2), 1.0)
+    assert fast[3, :, -1] == pytest.approx(1.0)  # all outside
+    # a sub-region bin image with its origin gives the same histograms for boxes inside it
+    sub_bins = pad_bins(bin_image(frame[10:55, 20:70], luts), 216)
+    sub = box_histograms(sub_bins, (20, 10), boxes[:1], grid, 216)
+    np.testing.assert_allclose(sub, fast[:1])
+
+
+def test_kernel_weighs_the_centre_most() -> None:
+    grid = kernel_grid(16, 32)
+    assert grid.weights.sum() == pytest.approx(1.0)
+    assert grid.weights[16, 8] == grid.weights.max()
+    assert grid.weights[0, 0] == 0.0  # corner lies outside the inscribed ellipse
+    seed_grid = kernel_grid(16, 32, "diagonal", aspect=0.5)
+    assert seed_grid.weights.min() > 0  # the seed's a = sqrt(w^2+h^2) never reaches zero
+
+
+def test_likelihood_peaks_at_the_true_box() -> None:
+    scene = Scene()
+    frame = scene.frame(0)
+    x, y, w, h = scene.truth(0)
+    truth = np.array([x + w / 2, y + h / 2, w, h])
+    likelihood = ColorLikelihood(ColorConfig(), GmmConfig())
+    likelihood.init(frame, truth)
+    shifts = np.arange(-12, 13, 2.0)
+    dx, dy = np.meshgrid(shifts, shifts)
+    boxes = np.column_stack(
+        [truth[0] + dx.ravel(), truth[1] + dy.ravel(), np.full(dx.size, w), np.full(dx.size, h)]
+    )
+    log_l = likelihood.log_likelihood(frame, boxes)
+    best = boxes[np.argmax(log_l)]
+    assert abs(best[0] - truth[0]) <= 2 and abs(best[1] - truth[1]) <= 2
+    # and over scale: the true size beats shrunken and grown boxes
+    scales = np.array([0.6, 0.8, 1.0, 1.25, 1.6])
+    sized = np.column_stack([np.full(5, truth[0]), np.full(5, truth[1]), w * scales, h * scales])
+    assert np.argmax(likelihood.log_likelihood(frame, sized)) == 2
+    assert likelihood.similarity(frame, truth) == pytest.approx(1.0)
+    assert likelihood.similarity(frame, truth + np.array([100, 60, 0, 0])) < 0.5
+
+
+def test_bhattacharyya_of_identical_and_disjoint_histograms() -> None:
+    q = np.array([[0.5, 0.5, 0.0]])
+    p = np.array([[[0.5, 0.5, 0.0, 0.0]], [[0.0, 0.0, 1.0, 0.0]], [[0.0, 0.0, 0.0, 1.0]]])
+    np.testing.assert_allclose(bhattacharyya(p, q), [1.0, 0.0, 0.0])
+
+
+def test_background_weights_downweight_common_ring_colours() -> None:
+    ring = np.array([0.7, 0.25, 0.05, 0.0])
+    v = background_weights(ring, floor=0.0)
+    np.testing.assert_allclose(v, [0.05 / 0.7, 0.05 / 0.25, 1.0, 1.0])
+
+
+def test_gmm_update_matches_a_hand_computed_example() -> None:
+    config = GmmConfig(alpha=0.1, beta=0.2, initial_sigma=0.5, diff_threshold=0.3)
+    model = GmmTargetModel(np.array([0.6, 0.4]), config)
+    np.testing.assert_allclose(model.model, [0.6, 0.4])
+    # bin 0 observes 0.8: |0.8-0.6| < 0.3 gate, first component (stable order) fits (< 1.5)
+    # mu0 = 0.9*0.6 + 0.1*0.8 = 0.62; sigma0 = sqrt(0.9*0.25 + 0.1*(0.8-0.62)^2)
+    # pi = (0.8*1/3 + 0.2, 0.8/3, 0.8/3); bin 1 observes 0.2 likewise: mu0 = 0.38
+    out = model.update(np.array([0.8, 0.2]))
+    sigma0 = np.sqrt(0.9 * 0.25 + 0.1 * 0.18**2)
+    np.testing.assert_allclose(model.mu[0], [0.62, 0.6, 0.6])
+    np.testing.assert_allclose(model.mu[1], [0.38, 0.4, 0.4])
+    np.testing.assert_allclose(model.sigma[0], [sigma0, 0.5, 0.5])
+    np.testing.assert_allclose(model.pi[0], [0.8 / 3 + 0.2, 0.8 / 3, 0.8 / 3])
+    # q = 0.6*mu_a + 0.25*mu_b + 0.15*mu_c, then normalised over the bins
+    raw = np.array([0.6 * 0.62 + 0.4 * 0.6, 0.6 * 0.38 + 0.4 * 0.4])
+    np.testing.assert_allclose(out, raw / raw.sum())
+    # a jump larger than diff_threshold leaves the bin's mixture alone
+    before = model.mu.copy()
+    model.update(np.array([0.1, 0.9]))
+    np.testing.assert_allclose(model.mu, before)
+
+
+def test_gmm_replaces_the_weakest_component_when_nothing_fits() -> None:
+    config = GmmConfig(initial_sigma=0.01, diff_threshold=0.5, beta=0.1)
+    model = GmmTargetModel(np.array([0.5, 0.5]), config)
+    model.update(np.array([0.5, 0.5]))  # component 0 gets the top weight
+    model.update(np.array([0.7, 0.3]))  # 0.2 away: > 3 sigma everywhere
+    assert model.mu[0, 2] == pytest.approx(0.7)
+    assert model.sigma[0, 2] == pytest.approx(0.01)
+    np.testing.assert_allclose(model.pi.sum(axis=1), 1.0)
+
+
+def test_colour_tracker_runs_on_grey_frames() -> None:
+    """Thermal / grey input (H x W and H x W x 1) is tracked, not a crash."""
+    from ptzd.vision.config import TrackerConfig
+    from ptzd.vision.tracking import TrackState, make_tracker
+
+    rng = np.random.default_rng(3)
+    base = rng.integers(20, 60, size=(120, 160), dtype=np.uint8)
+    for add_axis in (False, True):
+        tracker = make_tracker(TrackerConfig(num_particles=50))
+        frames = []
+        for t in range(6):
+            frame = base.copy()
+            frame[40:80, 30 + 4 * t : 50 + 4 * t] = 230  # a warm body moving right
+            frames.append(np.ascontiguousarray(frame[:, :, None] if add_axis else frame))
+        tracker.init(frames[0], (30.0, 40.0, 20.0, 40.0))
+        for frame in frames[1:]:
+            result = tracker.update(frame)
+        assert result.state is TrackState.TRACKING
+        assert abs(result.box[0] - 50.0) < 8.0

@@ -1,0 +1,226 @@
+"""Particle filter: resampling, occlusion handling, determinism, ego-motion, scale bounds."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from ptzd.vision.config import MotionConfig, ResamplingConfig, TrackerConfig
+from ptzd.vision.particle_filter import (
+    ParticleTracker,
+    effective_sample_size,
+    ego_motion_matrix,
+    weighted_resample,
+)
+from ptzd.vision.tracking import TrackState, make_tracker
+from tests.vision_helpers import Scene, iou
+
+
+def _run(scene: Scene, frames: int, config: TrackerConfig | None = None, ego: bool = False):
+    tracker = make_tracker(config or TrackerConfig())
+    tracker.init(scene.frame(0), scene.truth(0))
+    shift = np.array(scene.shift)
+    return [
+        tracker.update(scene.frame(t), ego_motion=shift if ego else None) for t in range(1, frames)
+    ]
+
+
+def test_effective_sample_size() -> None:
+    assert effective_sample_size(np.full(100, 0.01)) == pytest.approx(100)
+    assert effective_sample_size(np.eye(1, 100)[0]) == pytest.approx(1)
+
+
+@pytest.mark.parametrize("method", ["multinomial", "systematic"])
+def test_resampling_keeps_the_count_and_favours_heavy_particles(method: str) -> None:
+    rng = np.random.default_rng(0)
+    weights = rng.random(200) ** 8
+    weights[17] = 50 * weights.max()
+    weights /= weights.sum()
+    config = ResamplingConfig(top_rate=0.2, method=method)
+    idx = weighted_resample(weights, config, rng)
+    assert idx.shape == (200,)
+    counts = np.bincount(idx, minlength=200)
+    top = np.argsort(-weights)[:40]
+    assert set(np.flatnonzero(counts)) == set(top)  # only the top 20 % reproduce ...
+    assert counts[top].min() >= 1  # ... each at least once
+    assert counts.argmax() == 17 and counts[17] > 60  # the heavy one most often
+
+
+def test_tracks_a_moving_target() -> None:
+    scene = Scene(velocity=(2.0, 0.5))
+    results = _run(scene, 60)
+    ious = [iou(r.box, scene.truth(t)) for t, r in enumerate(results, 1)]
+    assert min(ious) > 0.5
+    assert all(r.state is TrackState.TRACKING for r in results)
+    vx, vy = results[-1].velocity
+    assert vx == pytest.approx(2.0, abs=0.8) and vy == pytest.approx(0.5, abs=0.8)
+
+
+def test_occlusion_handler_holds_through_a_full_occlusion_and_recovers() -> None:
+    # a 40 px grey bar hides the 24 px wide target completely for several frames
+    scene = Scene(velocity=(3.0, 0.0), occluder_x=(130, 170))
+    results = _run(scene, 50)
+    states = [r.state for r in results]
+    hidden = [t for t in range(1, 50) if scene.truth(t)[0] >= 130 and scene.truth(t)[0] + 24 <= 170]
+    assert hidden, "the scene must contain a full occlusion"
+    assert all(states[t - 1] is TrackState.OCCLUDED for t in hidden)
+    assert TrackState.LOST not in states
+    # the box coasts on in the direction of travel, and tracking resumes after the occluder
+    coast_x = [results[t - 1].box[0] for t in hidden]
+    assert all(b > a for a, b in itertools.pairwise(coast_x))
+    after = range(hidden[-1] + 6, 50)
+    assert all(states[t - 1] is TrackState.TRACKING for t in after)
+    assert all(iou(results[t - 1].box, scene.truth(t)) > 0.5 for t in after)
+
+
+def test_gives_up_after_max_frames_and_reacquires() -> None:
+    scene = Scene(velocity=(0.0, 0.0), vanish_after=5)
+    config = TrackerConfig(occlusion={"max_frames": 10})
+    tracker = make_tracker(config)
+    tracker.init(scene.frame(0), scene.truth(0))
+    states = [tracker.update(scene.frame(t)).state for t in range(1, 25)]
+    assert states[:5] == [TrackState.TRACKING] * 5
+    assert states[5:14] == [TrackState.OCCLUDED] * 9
+    assert states[14:] == [TrackState.LOST] * 10
+    # the target comes back where it left: the lost tracker finds it again
+    back = Scene(velocity=(0.0, 0.0))
+    states = [tracker.update(back.frame(t)).state for t in range(25, 30)]
+    assert states[-1] is TrackState.TRACKING
+
+
+def test_runs_are_repeatable_with_a_seed() -> None:
+    scene = Scene(velocity=(2.5, 1.0))
+    first = _run(scene, 20, TrackerConfig(seed=7))
+    second = _run(scene, 20, TrackerConfig(seed=7))
+    other = _run(scene, 20, TrackerConfig(seed=8))
+    assert [r.box for r in first] == [r.box for r in second]
+    assert [r.box for r in first] != [r.box for r in other]
+
+
+def test_ego_motion_shift_is_applied_in_prediction() -> None:
+    # the camera pans: everything moves 50 px/frame, far beyond the motion noise
+    scene = Scene(start=(20.0, 80.0, 24.0, 60.0), velocity=(0.0, 0.0), shift=(50.0, 0.0))
+    with_ego = _run(scene, 5, ego=True)
+    assert all(iou(r.box, scene.truth(t)) > 0.6 for t, r in enumerate(with_ego, 1))
+    without = _run(scene, 5, ego=False)
+    assert iou(without[0].box, scene.truth(1)) < 0.3
+
+
+def test_ego_motion_homography_moves_and_scales_particles() -> None:
+    scene = Scene()
+    config = TrackerConfig(motion=MotionConfig(sigma_x=0, sigma_vx=0, sigma_y=0, sigma_vy=0))
+    tracker = ParticleTracker(config, _FlatLikelihood())
+    tracker.init(scene.frame(0), (100.0, 100.0, 20.0, 40.0))
+    before = tracker.particles.copy()
+    zoom = np.array([[1.2, 0.0, -10.0], [0.0, 1.2, 5.0], [0.0, 0.0, 1.0]])
+    tracker.update(scene.frame(0), ego_motion=zoom)
+    after = tracker.particles
+    np.testing.assert_allclose(after[:, 0], 1.2 * before[:, 0] - 10.0, atol=1e-9)
+    np.testing.assert_allclose(after[:, 2], 1.2 * before[:, 2] + 5.0, atol=1e-9)
+    with pytest.raises(ValueError, match="ego_motion"):
+        ego_motion_matrix(np.zeros(3))
+
+
+def test_rescale_scales_the_box_about_the_centre() -> None:
+    scene = Scene()
+    tracker = make_tracker(TrackerConfig())
+    tracker.init(scene.frame(0), (100.0, 100.0, 20.0, 40.0))
+    tracker.rescale(2.0, (110.0, 120.0))  # zoom in 2x about the box centre
+    assert isinstance(tracker, ParticleTracker)
+    result = tracker._result()
+    np.testing.assert_allclose(result.box, (90.0, 80.0, 40.0, 80.0))
+
+
+@pytest.mark.parametrize(
+    # true final relative widths: 1.0, 1.008**79 = 1.88, 0.994**79 = 0.62
+    "growth, low, high",
+    [(0.0, 0.8, 1.25), (0.008, 1.15, 1.95), (-0.006, 0.55, 0.9)],
+)
+def test_scale_adaptation_stays_bounded_and_follows(growth: float, low: float, high: float) -> None:
+    scene = Scene(start=(120.0, 70.0, 24.0, 60.0), velocity=(0.5, 0.0), growth=growth)
+    results = _run(scene, 80)
+    widths = np.array([r.box[2] for r in results]) / 24.0
+    assert widths.min() >= 0.5 - 1e-9 and widths.max() <= 2.0 + 1e-9  # hard bounds
+    final = results[-1].box[2] / 24.0
+    assert low <= final <= high, f"final relative width {final:.2f}"
+
+
+class _FlatLikelihood:
+    """Scores every box the same, to observe the motion model alone."""
+
+    def init(self, frame, box):
+        pass
+
+    def log_likelihood(self, frame, boxes):
+        return np.zeros(len(boxes))
+
+    def similarity(self, frame, box):
+        return 1.0
+
+    def adapt(self, frame, box):
+        pass
+
+    def rescale(self, factor):
+        pass
+
+
+def test_reacquires_after_lost_when_the_target_reappears_beyond_the_coast() -> None:
+    # hidden for 32 frames behind a 100 px bar: LOST after max_frames, then the target walks
+    # out 60-100 px from where the coasting box stopped, beyond the initial search radius
+    scene = Scene(velocity=(3.0, 0.0), occluder_x=(100, 200))
+    config = TrackerConfig(occlusion={"max_frames": 10})
+    tracker = make_tracker(config)
+    tracker.init(scene.frame(0), scene.truth(0))
+    assert isinstance(tracker, ParticleTracker)
+    results, models = [], []
+    for t in range(1, 76):
+        results.append(tracker.update(scene.frame(t)))
+        models.append(tracker._likelihood.model.copy())  # type: ignore[attr-defined]
+    states = [r.state for r in results]
+    first_hidden = states.index(TrackState.OCCLUDED) + 1
+    first_lost = states.index(TrackState.LOST) + 1
+    assert first_lost - first_hidden == 9
+    back = next(t for t in range(first_lost, 76) if states[t - 1] is TrackState.TRACKING)
+    assert scene.truth(back)[0] + 24 > 200, "re-locked before the target came out"
+    # while hidden the target model stayed frozen: it never learnt the grey bar
+    for t in range(first_hidden, back):
+        np.testing.assert_array_equal(models[t - 1], models[first_hidden - 2])
+    # ... and from shortly after it came out, it is tracked again
+    after = range(back + 3, 76)
+    assert len(after) > 10
+    assert all(states[t - 1] is TrackState.TRACKING for t in after)
+    assert all(iou(results[t - 1].box, scene.truth(t)) > 0.5 for t in after)
+
+
+def test_lost_tracker_finds_the_target_anywhere_by_the_global_scan() -> None:
+    # the target vanishes and comes back 200 px away, standing still; the local search
+    # cannot grow that far (search_growth = 0), so only the frame-wide scan can find it
+    gone = Scene(start=(40.0, 80.0, 24.0, 60.0), velocity=(0.0, 0.0), vanish_after=3)
+    back = Scene(start=(240.0, 120.0, 24.0, 60.0), velocity=(0.0, 0.0))
+    for scan_every, found in ((5, True), (0, False)):
+        config = TrackerConfig(
+            occlusion={"max_frames": 5, "search_growth": 0.0, "scan_every": scan_every}
+        )
+        tracker = make_tracker(config)
+        tracker.init(gone.frame(0), gone.truth(0))
+        states = [tracker.update(gone.frame(t)).state for t in range(1, 12)]
+        assert states[-1] is TrackState.LOST
+        results = [tracker.update(back.frame(t)) for t in range(12, 40)]
+        final = results[-1]
+        if found:
+            assert final.state is TrackState.TRACKING
+            assert iou(final.box, back.truth(39)) > 0.5
+        else:
+            assert final.state is TrackState.LOST
+
+
+def test_ego_motion_is_not_counted_as_target_velocity() -> None:
+    # the camera pans 12 px/frame while the target walks 2 px/frame: with the shift given
+    # as ego-motion the learnt velocity is the target's own, in this frame's pixels
+    scene = Scene(start=(20.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.0), shift=(12.0, 0.0))
+    results = _run(scene, 16, ego=True)  # (the scene has 200 px of background to pan over)
+    assert all(iou(r.box, scene.truth(t)) > 0.5 for t, r in enumerate(results, 1))
+    assert all(r.state is TrackState.TRACKING for r in results)
+    assert results[-1].velocity[0] == pytest.approx(2.0, abs=1.0)

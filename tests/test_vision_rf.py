@@ -1,0 +1,228 @@
+"""Ko 2013 online random-forest tracker: features, forests, memory, learning condition."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from ptzd.vision.config import RfConfig, TrackerConfig
+from ptzd.vision.features import (
+    FeatureMaps,
+    epanechnikov_grid,
+    min_max,
+    ocs_lbp_maps,
+    to_grey,
+)
+from ptzd.vision.forest import ForestBank
+from ptzd.vision.rf import (
+    Branch,
+    Example,
+    RfTracker,
+    TrainingMemory,
+    choose_branch,
+    learning_bounds,
+    sample_negatives,
+)
+from ptzd.vision.tracking import TrackState, make_tracker
+from tests.vision_helpers import Scene, iou
+
+PATCH = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
+
+
+def test_ocs_lbp_of_a_3x3_patch_by_hand() -> None:
+    # neighbours of the centre, counter-clockwise from east: n0..n7 = 60 30 20 10 40 70 80 90
+    # pairs: n0-n4 = +20 -> bin 0; n1-n5 = -40 -> bin 5; n2-n6 = -60 -> bin 6; n3-n7 = -80 -> 7
+    centre = ocs_lbp_maps(PATCH, threshold=5)[1, 1]
+    assert centre.tolist() == [20, 0, 0, 0, 0, 40, 60, 80]
+    # differences up to T count for nothing (seed eq. 5)
+    assert ocs_lbp_maps(PATCH, threshold=20)[1, 1].tolist() == [0, 0, 0, 0, 0, 40, 60, 80]
+    # the seed's Fig. 2 example: n0 = 130 > n4 = 80 puts 50 in bin 0
+    fig2 = np.full((3, 3), 100, np.uint8)
+    fig2[1, 2], fig2[1, 0] = 130, 80
+    assert ocs_lbp_maps(fig2, threshold=5)[1, 1].tolist() == [50, 0, 0, 0, 0, 0, 0, 0]
+
+
+def test_min_max_normalisation() -> None:
+    h = np.array([[20.0, 0, 0, 0, 0, 40, 60, 80], [3.0] * 8])
+    assert min_max(h).tolist() == [[0.25, 0, 0, 0, 0, 0.5, 0.75, 1.0], [0.0] * 8]
+
+
+def test_epanechnikov_weights_by_hand() -> None:
+    # 3x3 samples at -2/3, 0, 2/3 subblock radii: 1 - ||x||^2 = 1, 5/9 (edge), 1/9 (corner)
+    expected = np.array([[1, 5, 1], [5, 9, 5], [1, 5, 1]]) / 9
+    assert epanechnikov_grid(3) == pytest.approx(expected)
+    # 2x2: every sample at (+-0.5, +-0.5): 1 - 0.5
+    assert epanechnikov_grid(2) == pytest.approx(np.full((2, 2), 0.5))
+
+
+def test_lid_and_ocs_per_subblock() -> None:
+    grey = np.zeros((60, 40), np.uint8)
+    grey[:, 20:] = 255  # left column of subblocks black, right column white
+    maps = FeatureMaps(grey, (0, 0, 40, 60), lid_bins=8, ocs_threshold=5)
+    box = np.array([[20.0, 30.0, 40.0, 60.0]])
+    lid = maps.lid(box, samples=4)[0]  # 6 subblocks (row-major, 3 rows x 2 cols) x 8
+    assert lid.sum(axis=1) == pytest.approx(np.ones(6))
+    assert lid[[0, 2, 4], 0] == pytest.approx(np.ones(3))
+    assert lid[[1, 3, 5], 7] == pytest.approx(np.ones(3))
+    ocs = maps.ocs_lbp(box)[0]
+    # the vertical edge: white east of black -> n0 - n4 > 0 (bin 0) and the diagonals 1, 7
+    assert ocs.shape == (6, 8)
+    assert np.all(ocs[:, 0] == 1.0)
+    assert np.all(ocs[:, 4] == 0.0)
+
+
+def test_forest_bank_separates_and_respects_depth() -> None:
+    rng = np.random.default_rng(0)
+    pos = rng.normal(1.0, 0.2, (15, 16))
+    neg = rng.normal(0.0, 0.2, (30, 16))
+    x = np.vstack([pos, neg])
+    y = np.arange(45) < 15
+    bank = ForestBank([(0, 8), (8, 16)], trees=4, max_depth=3, features_per_node=3)
+    bank.fit(x, y, rng)
+    assert bank.depth <= 3
+    p = bank.predict(np.vstack([rng.normal(1.0, 0.2, (5, 16)), rng.normal(0.0, 0.2, (5, 16))]))
+    assert p.shape == (10, 2)
+    assert np.all(p[:5] > 0.7) and np.all(p[5:] < 0.3)
+
+
+def test_memory_grows_1_to_2_and_keeps_five_early_positives() -> None:
+    memory = TrainingMemory(positives=15, negatives=30, kept=5)
+    row = np.zeros(3)
+    memory.add_positive(Example(row, 0))
+    assert memory.negatives_wanted() == 2
+    for i in range(1, 15):
+        memory.add_positive(Example(row, i))
+    assert memory.negatives_wanted() == 30
+    kept = [e.frame_index for e in memory.kept]
+    assert len(kept) == 5 and kept[0] == 0 and kept[-1] == 14 and all(k < 15 for k in kept)
+    for i in range(15, 200):
+        memory.add_positive(Example(row, i))
+    frames = [e.frame_index for e in memory.positives]
+    assert len(frames) == 15
+    assert frames[:5] == kept  # the kept early positives survive
+    assert frames[5:] == list(range(190, 200))  # the rest is a queue of the newest
+
+
+def test_learning_bounds_follow_eqs_21_22() -> None:
+    cfg = RfConfig()
+    lo, hi = learning_bounds(100.0, cfg)  # 5.4 / ln 100 = 1.17 -> capped at 0.72
+    assert (lo, hi) == pytest.approx((0.32, 0.72))
+    lo, hi = learning_bounds(float(np.exp(10.0)), cfg)  # 5.4 / 10
+    assert (lo, hi) == pytest.approx((0.14, 0.54))
+    assert learning_bounds(0.0, cfg) == pytest.approx((0.32, 0.72))  # flat box: the cap
+
+
+@pytest.mark.parametrize(
+    ("diff", "p", "branch"),
+    [
+        (10.0, 0.99, Branch.ABNORMAL),  # jump >= half the width, however confident
+        (2.0, 0.9, Branch.LEARN),
+        (2.0, 0.5, Branch.PARTIAL_OCCLUSION),
+        (2.0, 0.2, Branch.FULL_OCCLUSION),
+    ],
+)
+def test_each_branch_of_the_learning_condition(diff: float, p: float, branch: Branch) -> None:
+    assert choose_branch(diff, half_width=10.0, p=p, u_min=0.32, u_max=0.72) is branch
+
+
+def test_negatives_avoid_the_target_and_stay_in_frame() -> None:
+    box = np.array([100.0, 80.0, 20.0, 40.0])
+    neg = sample_negatives(box, 200, 2.0, (160, 200), np.random.default_rng(1))
+    off = np.abs(neg[:, :2] - box[:2]) / box[2:]
+    inside = (neg[:, 0] >= 0) & (neg[:, 0] < 200) & (neg[:, 1] >= 0) & (neg[:, 1] < 160)
+    assert np.all(inside)
+    clipped = (neg[:, 0] == 0) | (neg[:, 0] == 199) | (neg[:, 1] == 0) | (neg[:, 1] == 159)
+    assert np.all(np.any(off >= 0.6 - 1e-9, axis=1) | clipped)
+    assert np.all(neg[:, 2:] == box[2:])
+
+
+def _grey_scene(scene: Scene, t: int, black_hot: bool = False) -> np.ndarray:
+    grey = to_grey(scene.frame(t))
+    return 255 - grey if black_hot else grey
+
+
+@pytest.mark.parametrize("black_hot", [False, True])
+def test_tracks_a_grey_target(black_hot: bool) -> None:
+    scene = Scene()
+    tracker = make_tracker(TrackerConfig(kind="rf"))
+    tracker.init(_grey_scene(scene, 0, black_hot), scene.truth(0))
+    scores = []
+    for t in range(1, 30):
+        result = tracker.update(_grey_scene(scene, t, black_hot))
+        scores.append(iou(result.box, scene.truth(t)))
+    assert np.mean(scores) > 0.5
+    assert isinstance(tracker, RfTracker) and tracker.learned_frames >= 15
+
+
+def test_thermal_input_shapes_give_the_same_track() -> None:
+    scene = Scene()
+    grey = [_grey_scene(scene, t) for t in range(8)]
+    shapes = {
+        "HxW": grey,
+        "HxWx1": [g[:, :, None] for g in grey],
+        "HxWx3": [cv2.cvtColor(g, cv2.COLOR_GRAY2BGR) for g in grey],
+    }
+    tracks = {}
+    for name, frames in shapes.items():
+        tracker = RfTracker(TrackerConfig(kind="rf"))
+        tracker.init(frames[0], scene.truth(0))
+        tracks[name] = [tracker.update(f).box for f in frames[1:]]
+    assert tracks["HxW"] == tracks["HxWx1"] == tracks["HxWx3"]
+    with pytest.raises(ValueError, match="HxW"):
+        RfTracker(TrackerConfig(kind="rf")).init(np.zeros((4, 4, 2), np.uint8), (0, 0, 2, 2))
+
+
+def test_full_occlusion_counts_and_terminates_after_t2() -> None:
+    scene = Scene(vanish_after=20)
+    cfg = TrackerConfig(kind="rf", rf=RfConfig(max_occluded=10))
+    tracker = RfTracker(cfg)
+    tracker.init(_grey_scene(scene, 0), scene.truth(0))
+    branches, states = [], []
+    for t in range(1, 60):
+        result = tracker.update(_grey_scene(scene, t))
+        branches.append(tracker.branch)
+        states.append(result.state)
+    assert Branch.LEARN in branches[:20]
+    assert Branch.FULL_OCCLUSION in branches[20:]
+    assert TrackState.LOST in states[20:]
+    assert TrackState.LOST not in states[:20]
+
+
+def test_static_rf_learns_only_once() -> None:
+    scene = Scene()
+    tracker = RfTracker(TrackerConfig(kind="rf", rf=RfConfig(online=False)))
+    tracker.init(_grey_scene(scene, 0), scene.truth(0))
+    for t in range(1, 10):
+        tracker.update(_grey_scene(scene, t))
+    assert tracker.learned_frames == 1
+
+
+def test_cli_track_rf_on_a_real_encoded_video(tmp_path: Path) -> None:
+    scene = Scene()
+    path = tmp_path / "scene.avi"
+    writer = cv2.VideoWriter(
+        str(path), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (scene.width, scene.height)
+    )
+    for t in range(25):
+        writer.write(cv2.cvtColor(_grey_scene(scene, t), cv2.COLOR_GRAY2BGR))
+    writer.release()
+    out = tmp_path / "out.json"
+    init = ",".join(f"{v:g}" for v in scene.truth(0))
+    proc = subprocess.run(
+        [sys.executable, "-m", "ptzd", "track", str(path), "--tracker", "rf", "--init", init,
+         "--out", str(out), "--particles", "60"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(out.read_text())
+    assert data["params"]["tracker"] == "rf"
+    assert data["params"]["config"]["rf"]["num_particles"] == 60
+    boxes = data["boxes"]
+    assert len(boxes) == 25
+    assert np.mean([iou(tuple(boxes[str(t)]), scene.truth(t)) for t in range(1, 25)]) > 0.5

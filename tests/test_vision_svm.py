@@ -1,0 +1,156 @@
+"""Sun 2015 SVM + Lucas-Kanade tracker: features, kernel, Platt scaling, LK/PF switch."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from ptzd.vision.config import TrackerConfig
+from ptzd.vision.features import ColourTextureMaps, lbp_riu2, rgb_codes
+from ptzd.vision.svm import (
+    LucasKanade,
+    Mode,
+    SvmModel,
+    SvmTracker,
+    intersection_kernel,
+    platt_fit,
+    platt_probability,
+)
+from tests.vision_helpers import Scene, iou
+
+REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
+
+
+def test_uniform_rotation_invariant_lbp_by_hand() -> None:
+    # neighbours >= 50 (centre), counter-clockwise from east: 60 30 20 10 40 70 80 90
+    # bits 1 0 0 0 0 1 1 1: two transitions -> uniform, four ones -> code 4
+    patch = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
+    assert lbp_riu2(patch)[1, 1] == 4
+    assert lbp_riu2(np.full((3, 3), 7, np.uint8))[1, 1] == 8  # flat: all >= centre
+    checker = np.array([[60, 40, 60], [40, 50, 40], [60, 40, 60]], np.uint8)
+    assert lbp_riu2(checker)[1, 1] == 9  # eight transitions: non-uniform
+
+
+def test_rgb_bins_and_37_d_histograms() -> None:
+    pixel = np.array([[[0, 128, 255]]], np.uint8)  # B G R
+    assert rgb_codes(pixel)[0, 0] == 2 * 9 + 1 * 3 + 0
+    img = np.zeros((40, 40, 3), np.uint8)
+    img[:, :, 2] = 255  # pure red
+    maps = ColourTextureMaps(img, (0, 0, 40, 40), grid=8)
+    h = maps.histograms(np.array([[20.0, 20.0, 20.0, 20.0], [0.0, 0.0, 20.0, 20.0]]))
+    assert h.shape == (2, 37)
+    assert h[0, 18] == pytest.approx(1.0)  # r = 2, g = b = 0
+    assert h[0, 27 + 8] == pytest.approx(1.0)  # flat texture: LBP code 8
+    assert h[1, :27].sum() == pytest.approx(0.25)  # three quarters outside the frame
+
+
+def test_intersection_kernel_by_hand() -> None:
+    a = np.array([[0.5, 0.5], [1.0, 0.0]])
+    assert intersection_kernel(a, a) == pytest.approx(np.array([[1.0, 0.5], [0.5, 1.0]]))
+
+
+def test_platt_scaling_is_monotone_and_calibrated() -> None:
+    rng = np.random.default_rng(0)
+    f = np.concatenate([rng.normal(1.5, 1.0, 200), rng.normal(-1.5, 1.0, 200)])
+    y = np.arange(400) < 200
+    a, b = platt_fit(f, y)
+    assert a < 0
+    grid = np.linspace(-6, 6, 101)
+    p = platt_probability(grid, a, b)
+    assert np.all(np.diff(p) > 0)
+    assert p[0] < 0.05 and p[-1] > 0.95
+    assert platt_probability(np.array([0.0]), a, b)[0] == pytest.approx(0.5, abs=0.1)
+
+
+def test_svm_model_scores_positives_above_negatives() -> None:
+    rng = np.random.default_rng(1)
+    pos = rng.dirichlet(np.r_[np.full(5, 20.0), np.ones(32)], 30)
+    neg = rng.dirichlet(np.r_[np.ones(32), np.full(5, 20.0)], 60)
+    model = SvmModel(c=1.0)
+    model.fit(np.vstack([pos, neg]), np.arange(90) < 30)
+    p = model.probability(np.vstack([pos[:5], neg[:5]]))
+    assert np.all(p[:5] > 0.5) and np.all(p[5:] < 0.5)
+
+
+def test_lucas_kanade_recovers_a_shift() -> None:
+    rng = np.random.default_rng(0)
+    noise = rng.integers(0, 256, (240, 320)).astype(np.uint8)
+    blurred = cv2.GaussianBlur(noise, (0, 0), 3).astype(np.float64)
+    span = blurred.max() - blurred.min()
+    textured = ((blurred - blurred.min()) * 255 / span).astype(np.uint8)
+    box = np.array([100.0, 100.0, 40.0, 60.0])
+    lk = LucasKanade(size=32, iterations=30)
+    lk.set_template(textured, box)
+    error = lk.track(np.roll(textured, (3, 4), axis=(0, 1)))
+    assert lk.box() == pytest.approx([104.0, 103.0, 40.0, 60.0], abs=0.1)
+    assert error < 0.01
+    # a flat two-colour target: its silhouette in the template margin carries it
+    scene = Scene()
+    grey = np.asarray(cv2.cvtColor(scene.frame(0), cv2.COLOR_BGR2GRAY), np.uint8)
+    x, y, w, h = scene.truth(0)
+    lk.set_template(grey, np.array([x + w / 2, y + h / 2, w, h]))
+    lk.track(np.roll(grey, (3, 4), axis=(0, 1)))
+    assert lk.box()[:2] == pytest.approx([x + w / 2 + 4, y + h / 2 + 3], abs=1.0)
+
+
+def test_switches_from_lk_to_pf_and_back() -> None:
+    scene = Scene()
+    tracker = SvmTracker(TrackerConfig(kind="svm"))
+    tracker.init(scene.frame(0), scene.truth(0))
+    tracker.update(scene.frame(1))
+    assert tracker.mode is Mode.LK
+    noise = np.random.default_rng(2).integers(0, 256, scene.frame(0).shape, dtype=np.uint8)
+    tracker.update(noise)  # the template no longer matches: SSD error above h1
+    assert str(tracker.mode) == "pf"
+    assert tracker.lk_error > tracker._svm_config.lk_error
+    modes = []
+    for t in range(3, 15):
+        tracker.update(scene.frame(t))
+        modes.append(tracker.mode)
+    assert Mode.LK in modes  # a confident PF estimate hands back to LK
+
+
+def test_retrains_after_15_new_positives_and_tracks() -> None:
+    scene = Scene()
+    tracker = SvmTracker(TrackerConfig(kind="svm"))
+    tracker.init(scene.frame(0), scene.truth(0))
+    scores = []
+    for t in range(1, 40):
+        result = tracker.update(scene.frame(t))
+        scores.append(iou(result.box, scene.truth(t)))
+    assert np.mean(scores) > 0.5
+    assert tracker.retrains >= 1
+    assert len(tracker.positives) == 50
+
+
+def test_grey_input_works() -> None:
+    scene = Scene()
+    tracker = SvmTracker(TrackerConfig(kind="svm"))
+    grey = [
+        np.asarray(cv2.cvtColor(scene.frame(t), cv2.COLOR_BGR2GRAY), np.uint8) for t in range(6)
+    ]
+    tracker.init(grey[0], scene.truth(0))
+    for g in grey[1:]:
+        result = tracker.update(g)
+    assert iou(result.box, scene.truth(5)) > 0.4
+
+
+@pytest.mark.skipif(not REAL_VIDEO.is_file(), reason="run ./scripts/fetch-vtest.sh")
+@pytest.mark.parametrize("kind", ["svm", "rf"])
+def test_cli_track_on_vtest(kind: str, tmp_path: Path) -> None:
+    out = tmp_path / "out.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "ptzd", "track", str(REAL_VIDEO), "--tracker", kind,
+         "--init", "380,290,40,110", "--end", "20", "--out", str(out)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(out.read_text())
+    assert data["params"]["tracker"] == kind
+    assert len(data["boxes"]) == 21
