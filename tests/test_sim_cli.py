@@ -131,6 +131,7 @@ def test_sim_camera_virtual_clock_replay_is_bit_for_bit(wide_video: Path, tmp_pa
 
 def test_sim_camera_real_time_over_a_pty(wide_video: Path, tmp_path: Path) -> None:
     import serial
+
     from ptzd.pelco.codec import Motion, PelcoProtocol, encode
 
     process = subprocess.Popen(

@@ -5,6 +5,9 @@ from __future__ import annotations
 import math
 
 import pytest
+
+from ptzd.config import validate_config
+from ptzd.errors import ConfigError
 from ptzd.pelco.codec import (
     AbsolutePosition,
     Axis,
@@ -15,9 +18,6 @@ from ptzd.pelco.codec import (
     Zoom,
     ZoomSpeed,
 )
-
-from ptzd.config import validate_config
-from ptzd.errors import ConfigError
 from ptzd.sim.config import SimConfig
 from ptzd.sim.dome import Dome, speed_from_byte, wrap_degrees
 
