@@ -6,8 +6,10 @@ Tasks (named as below) joined by single-slot latest-value mailboxes (`ptzd.mailb
   into the frame mailbox. A frame the vision worker has not taken yet is replaced, never
   queued; replacements are counted as dropped frames.
 - ``vision``: the tracker, off the event loop in its own thread, on the latest frame, with
-  the dome's motion since the previous frame as ego-motion (and zoom as `rescale`). Each
-  result goes to the track mailbox with the frame's capture time.
+  the dome's motion since the previous frame as ego-motion (and zoom as `rescale`). With a
+  detector (acquisition enabled) the same thread then runs the detector and the acquisition
+  state machine, which locks new targets, re-identifies lost ones and gives up (docs/daemon.md).
+  Each result goes to the track mailbox with the frame's capture time.
 - ``control``: at a fixed rate and at once on every new track, `PtzController` turns the
   latest track into a command. A track older than `control.max_track_age_s` is never acted
   on: the dome gets STOP.
@@ -48,6 +50,9 @@ from ptzd.mailbox import Mailbox, MailboxClosedError
 from ptzd.pelco.codec import Command, Motion, Preset, PresetAction, Zoom
 from ptzd.sdnotify import Heartbeats, Notifier, Watchdog
 from ptzd.sim.camera_model import Pose
+from ptzd.vision.acquisition import AcqState, Acquirer, Decision, Transition
+from ptzd.vision.acquisition import TrackResult as AcqTrack
+from ptzd.vision.detect.types import Detector
 from ptzd.vision.tracking import Tracker, TrackResult, TrackState
 
 if TYPE_CHECKING:
@@ -80,14 +85,26 @@ async def send_command(link: CommandLink, command: Command) -> None:
 
 @dataclass(frozen=True, slots=True)
 class TrackItem:
-    """One tracker result with the frame it came from."""
+    """One processed frame: the tracker's result (None: no target) and the frame."""
 
-    result: TrackResult
+    result: TrackResult | None
     frame: FrameItem
     pose: Pose  # the dome pose at capture (reported by the source, else dead-reckoned)
     velocity: tuple[float, float]  # px/s, the target's own motion (ego-motion removed)
     acquired: BoxTuple | None = None  # set on the first result of a newly selected target
     generation: int = 0  # the target selection this track belongs to
+    # with acquisition: its state (searching, tracking, occluded, lost, returning_home),
+    # the transitions made on this frame, and whether to send the dome home now
+    state: str | None = None
+    transitions: tuple[Transition, ...] = ()
+    go_home: bool = False
+
+    @property
+    def published_state(self) -> str:
+        """The state on MQTT and in STATUS=: searching, tracking, occluded or lost."""
+        if self.state is not None:
+            return "searching" if self.state == AcqState.RETURNING_HOME else self.state
+        return "searching" if self.result is None else str(self.result.state)
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,6 +159,7 @@ class Daemon:
         inline_vision: bool = False,
         observer: DaemonObserver | None = None,
         bridge: MqttBridge | None = None,
+        detector: Detector | None = None,
         notifier: Notifier | None = None,
         watchdog_environ: Mapping[str, str] | None = None,
         health_max_age_s: float = HEALTH_MAX_AGE_S,
@@ -155,6 +173,9 @@ class Daemon:
         self.inline_vision = inline_vision
         self.observer = observer
         self.bridge = bridge
+        # with a detector (and `acquisition.enabled`) the daemon finds people by itself
+        self.detector = detector if config.acquisition.enabled else None
+        self.acquirer: Acquirer | None = None  # built on the first frame (its size)
         self.notifier = notifier
         self.heartbeats = Heartbeats(("frame", "control"), clock=clock)
         self.health_max_age_s = health_max_age_s
@@ -351,30 +372,80 @@ class Daemon:
                 except MailboxClosedError:
                     return
                 pose = self._pose_at(frame)
+                if self.detector is not None and self.acquirer is None:
+                    self.acquirer = Acquirer(self.config.acquisition, frame.size)
                 if self._drop_target:
                     tracker, previous, self._drop_target = None, None, False
+                    if self.acquirer is not None:
+                        self.acquirer.reset(frame.capture_time)
                 if self._pending_box is not None:
                     box, self._pending_box = self._pending_box, None
                     generation = self._generation
                     tracker = spare if spare is not None else self.tracker_factory()
                     spare = None
                     await self._blocking(tracker.init, frame.image, box)
-                    result = TrackResult(box, TrackState.TRACKING, 1.0, (0.0, 0.0))
-                    self._publish(
-                        TrackItem(result, frame, pose, (0.0, 0.0), box, generation=generation)
-                    )
+                    decision: Decision | None = None
+                    if self.acquirer is not None:
+                        decision = self.acquirer.select(frame.capture_time, box)
+                    result: TrackResult | None = TrackResult(box, TrackState.TRACKING, 1.0, (0, 0))
+                    self._publish(_track_item(result, frame, pose, (0.0, 0.0), box, generation,
+                                              decision))  # fmt: skip
                     previous = (frame, pose)
                     continue
-                if tracker is None or previous is None:
+                if self.acquirer is None and (tracker is None or previous is None):
                     continue
-                result = await self._blocking(self._track_step, tracker, frame, pose, previous[1])
-                dt = frame.capture_time - previous[0].capture_time
-                vx, vy = result.velocity
-                velocity = (vx / dt, vy / dt) if dt > 0 else (0.0, 0.0)
-                self._publish(TrackItem(result, frame, pose, velocity, generation=generation))
+                before = previous[1] if previous is not None else pose
+                result = None
+                if tracker is not None:
+                    result = await self._blocking(self._track_step, tracker, frame, pose, before)
+                decision = None
+                acquired: BoxTuple | None = None
+                if self.acquirer is not None:
+                    decision = await self._blocking(self._acquire_step, frame, pose, before, result)
+                    if decision.lock_box is not None:  # a new target, or the old one re-found
+                        box = decision.lock_box
+                        tracker = self.tracker_factory()
+                        await self._blocking(tracker.init, frame.image, box)
+                        result = TrackResult(box, TrackState.TRACKING, 1.0, (0.0, 0.0))
+                        if not _reidentified(decision):  # same person: same id, same size
+                            acquired = box
+                            self._generation += 1
+                            generation = self._generation
+                    elif decision.state in (AcqState.SEARCHING, AcqState.RETURNING_HOME):
+                        tracker, result = None, None  # given up (or dropped as static)
+                velocity = (0.0, 0.0)
+                if result is not None and previous is not None:
+                    dt = frame.capture_time - previous[0].capture_time
+                    vx, vy = result.velocity
+                    velocity = (vx / dt, vy / dt) if dt > 0 else (0.0, 0.0)
+                self._publish(
+                    _track_item(result, frame, pose, velocity, acquired, generation, decision)
+                )
                 previous = (frame, pose)
         finally:
             self.tracks.close()
+
+    def _acquire_step(
+        self, frame: FrameItem, pose: Pose, before: Pose, result: TrackResult | None
+    ) -> Decision:
+        """Detection (when it can run) and the acquisition state machine for one frame.
+
+        The background model needs a still camera: any change of pose between two frames is
+        a move, and the detector is told so (it resets and learns again once still); while
+        the camera moves only a detector that works on moving views reports anything.
+        """
+        assert self.detector is not None and self.acquirer is not None
+        moving = (pose.pan, pose.tilt, pose.hfov) != (before.pan, before.tilt, before.hfov)
+        detections = self.detector.detect(frame.image, camera_moving=moving)
+        ran = not moving or self.config.detector.kind == "hog"
+        ran = ran or self.config.detector.when_moving == "hog"
+        track = None
+        if result is not None:  # a tracker that gave up (LOST) reports no box
+            box = None if result.state is TrackState.LOST else result.box
+            track = AcqTrack(box, occluded=result.state is TrackState.OCCLUDED)
+        return self.acquirer.update(
+            frame.capture_time, detections if ran else None, track, camera_moving=moving
+        )
 
     @staticmethod
     def _track_step(tracker: Tracker, frame: FrameItem, pose: Pose, before: Pose) -> TrackResult:
@@ -393,7 +464,7 @@ class Daemon:
 
     def _publish(self, item: TrackItem) -> None:
         self.stats.frames_processed += 1
-        self._track_state = str(item.result.state)
+        self._track_state = item.published_state
         if self.observer is not None:
             self.observer.on_track(item)
         if self.bridge is not None:
@@ -408,12 +479,13 @@ class Daemon:
         bridge.publish_track(
             TrackMessage(
                 ts=time.time() - age,
-                state=str(r.state),
+                state=item.published_state,
                 id=item.generation,  # one id per target selection
                 frame_size=item.frame.size,
-                bbox=r.box,
-                confidence=r.confidence,
-                velocity=item.velocity,
+                bbox=None if r is None else r.box,
+                confidence=None if r is None else r.confidence,
+                velocity=None if r is None else item.velocity,
+                transitions=tuple(t.to_dict() for t in item.transitions),
             )
         )
 
@@ -507,6 +579,10 @@ class Daemon:
         commands: list[Command] = []
         if decision.preset is not None:
             commands.append(decision.preset)
+        elif fresh is not None and fresh.go_home and self.controller is not None:
+            home = self.controller.go_home()  # acquisition gave up on the target
+            if home is not None:
+                commands.append(home)
         motion = decision.motion
         if motion != self._last_motion or now - self._last_sent >= self.config.control.refresh_s:
             commands.append(motion)
@@ -618,8 +694,37 @@ class Daemon:
                 self._final_stop_sent = True
 
 
+def daemon_detector(config: Config) -> Detector | None:
+    """The person detector the daemon runs (None with `acquisition.enabled = false`)."""
+    if not config.acquisition.enabled:
+        return None
+    from ptzd.vision.detect.factory import build_detector
+
+    return build_detector(config.detector)
+
+
+def _reidentified(decision: Decision) -> bool:
+    return any(t.reason == "reidentified" for t in decision.transitions)
+
+
+def _track_item(
+    result: TrackResult | None,
+    frame: FrameItem,
+    pose: Pose,
+    velocity: tuple[float, float],
+    acquired: BoxTuple | None,
+    generation: int,
+    decision: Decision | None,
+) -> TrackItem:
+    if decision is None:
+        return TrackItem(result, frame, pose, velocity, acquired, generation)
+    return TrackItem(result, frame, pose, velocity, acquired, generation,
+                     state=str(decision.state), transitions=decision.transitions,
+                     go_home=decision.go_home)  # fmt: skip
+
+
 def _track_input(item: TrackItem | None) -> TrackInput | None:
-    if item is None:
+    if item is None or item.result is None:
         return None
     r = item.result
     return TrackInput(Box(*r.box), item.velocity, r.state, r.confidence, item.frame.capture_time)

@@ -58,6 +58,12 @@ def add_arguments(parser: Any) -> None:
     parser.add_argument(
         "--virtual-clock", action="store_true", help="deterministic, as fast as possible"
     )
+    parser.add_argument(
+        "--acquire",
+        action="store_true",
+        help="start with no target: the daemon's detector finds one (scored on the walker "
+        "the dome starts pointed at)",
+    )
     parser.add_argument("--config", metavar="FILE", help="TOML config (default: built-in)")
     parser.add_argument("--mqtt-url", metavar="URL", help="publish over MQTT (mqtt://HOST:PORT)")
     parser.add_argument("--camera-name", metavar="NAME", help="camera name for MQTT topics")
@@ -97,6 +103,7 @@ class ClosedLoopOptions:
     virtual: bool = False
     mqtt_url: str | None = None
     camera_name: str | None = None
+    acquire: bool = False  # no initial box: the daemon's own detection must lock on
 
     @classmethod
     def from_args(cls, args: Any) -> ClosedLoopOptions:
@@ -138,6 +145,7 @@ class ClosedLoopOptions:
             virtual=bool(args.virtual_clock),
             mqtt_url=args.mqtt_url,
             camera_name=args.camera_name,
+            acquire=bool(getattr(args, "acquire", False)),
         )
 
 
@@ -220,10 +228,12 @@ class _Recorder:
             "t": round(item.frame.capture_time - self.epoch_of(), 6),
             "frame": item.frame.index,
             "video_frame": self.video_frame_of(item.frame.index),
-            "box": [round(v, 2) for v in r.box],
-            "state": str(r.state),
-            "confidence": round(r.confidence, 4),
+            "box": None if r is None else [round(v, 2) for v in r.box],
+            "state": item.published_state,
+            "confidence": None if r is None else round(r.confidence, 4),
         }
+        if item.transitions:
+            record["transitions"] = [t.to_dict() for t in item.transitions]
         self.tracks.append(record)
         if self.stream is not None:
             self.stream.write(json.dumps(record, separators=(",", ":")) + "\n")
@@ -278,7 +288,7 @@ def _line_synced_clock() -> Any:
 
 async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
     """Run the simulated dome and the daemon together; returns the report."""
-    from ptzd.app import Daemon
+    from ptzd.app import Daemon, daemon_detector
     from ptzd.capture import SimFrameSource
     from ptzd.clock import Clock, RealClock
     from ptzd.mqtt.bridge import optional_bridge
@@ -292,6 +302,8 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
 
     config = options.config
     sim_cfg = config.sim
+    if options.acquire and not config.acquisition.enabled:
+        raise UsageError("--acquire needs acquisition.enabled = true (the daemon's detector)")
     if options.wide_hfov is not None:
         sim_cfg = sim_cfg.model_copy(update={"wide_hfov": options.wide_hfov})
     try:
@@ -374,11 +386,12 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
                 tracker_factory=lambda: make_tracker(config.tracker),
                 link=link,
                 clock=clock,
-                initial_box=init_box,
+                initial_box=None if options.acquire else init_box,
                 start_pose=pose0,
                 inline_vision=options.virtual,
                 observer=observer,
                 bridge=bridge,
+                detector=daemon_detector(config),
             )
             await _drive(camera, daemon, clock, duration)
             # both ends before closing the link adds its own STOPs (the dome has stopped listening)
@@ -413,6 +426,11 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
             "bad_checksums": int(camera.link.parser.bad_checksums),
             "stale_stops": daemon.stats.stale_stops,
             "control_modes": observer.modes,
+            "acquire": options.acquire,
+            # seconds from the start to the first frame with a locked target
+            "first_lock_s": next(
+                (t["t"] for t in observer.tracks if t["state"] == "tracking"), None
+            ),
         },
     )
     if options.record is not None:

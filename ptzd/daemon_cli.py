@@ -82,7 +82,7 @@ async def run_daemon(config: Config, init: tuple[float, float, float, float] | N
     import asyncio
     import signal
 
-    from ptzd.app import Daemon
+    from ptzd.app import Daemon, daemon_detector
     from ptzd.capture import VideoCaptureSource
     from ptzd.clock import RealClock
     from ptzd.mqtt.bridge import optional_bridge
@@ -91,6 +91,7 @@ async def run_daemon(config: Config, init: tuple[float, float, float, float] | N
     from ptzd.vision.tracking import make_tracker
 
     clock = RealClock()
+    detector = daemon_detector(config)  # before anything opens: a bad codebook exits 2
     notifier = Notifier.from_environ()
     source = VideoCaptureSource(config.capture.source, clock)
     loop = asyncio.get_running_loop()
@@ -106,6 +107,7 @@ async def run_daemon(config: Config, init: tuple[float, float, float, float] | N
             clock=clock,
             initial_box=init,
             bridge=bridge,
+            detector=detector,
             notifier=notifier,
         )
         for sig in (signal.SIGINT, signal.SIGTERM):

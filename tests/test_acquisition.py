@@ -203,3 +203,38 @@ def test_reset_returns_to_searching() -> None:
     run.lock(det(100, 100))
     decision = run.acq.reset(run.now)
     assert decision.state is AcqState.SEARCHING and run.events[-1].reason == "reset"
+
+
+def test_a_selected_target_is_pinned_not_switched_nor_dropped_as_static() -> None:
+    run = Run(min_switch_s=0.5, switch_margin=1.5, static_s=1.0)
+    small = det(100, 100, 20, 50)
+    decision = run.acq.select(run.now, small.box)
+    assert decision.state is AcqState.TRACKING and decision.lock_box == small.box
+    assert run.events[-1].reason == "selected"
+    big = det(400, 100, 60, 160)
+    for _ in range(40):  # a much larger person, and the selected one never moves or confirms
+        decision = run.step([big], TrackResult(small.box))
+        assert decision.lock_box is None
+        assert decision.state is AcqState.TRACKING
+    # the same situation with an acquired (not selected) target switches
+    free = Run(min_switch_s=0.5, switch_margin=1.5, static_s=10.0)
+    free.lock(small)
+    assert any(free.step([small, big], TrackResult(small.box)).lock_box == big.box
+               for _ in range(20))  # fmt: skip
+
+
+def test_reidentification_waits_until_the_tracker_gives_up_and_keeps_the_pin() -> None:
+    run = Run()
+    run.acq.select(run.now, (100, 100, 30, 80))
+    assert run.step([], TrackResult((100, 100, 30, 80), occluded=True)).state is AcqState.OCCLUDED
+    # the tracker still searches (a box, occluded): a person near the last box is left alone
+    for _ in range(5):
+        decision = run.step([det(120, 100)], TrackResult((100, 100, 30, 80), occluded=True))
+        assert decision.lock_box is None
+    # it gave up (no box): the detection near the last box re-identifies the target
+    decision = run.step([det(120, 100)], TrackResult(None))
+    assert decision.lock_box == (120.0, 100.0, 30.0, 80.0)
+    assert run.events[-1].reason == "reidentified"
+    big = det(400, 100, 60, 160)
+    for _ in range(80):  # still the operator's target: never switched
+        assert run.step([big], TrackResult((120, 100, 30, 80))).lock_box is None

@@ -55,3 +55,30 @@ async def test_virtual_closed_loop_keeps_the_walker_centred_and_is_deterministic
     serial_lines = (tmp_path / "a" / "serial.jsonl").read_text().splitlines()
     motions = [s for s in map(json.loads, serial_lines) if s["command"] == "Motion"]
     assert motions[-1]["pan"] == 0 and motions[-1]["tilt"] == 0 and motions[-1]["zoom"] == "none"
+
+
+@pytest.mark.slow
+async def test_unattended_daemon_finds_the_walker_by_itself_within_a_second(
+    tmp_path: Path,
+) -> None:
+    options = ClosedLoopOptions(
+        config=validate_config({}, environ={}),
+        spec="synthetic:0",
+        duration=4.0,
+        record=tmp_path,
+        virtual=True,
+        acquire=True,
+    )
+    report = await run_closed_loop(options)
+    tracks = [json.loads(line) for line in (tmp_path / "track.jsonl").read_text().splitlines()]
+    # no target at first: searching, no box, and the dome is not driven
+    assert tracks[0]["state"] == "searching" and tracks[0]["box"] is None
+    locks = [t for r in tracks for t in r.get("transitions", ()) if t["reason"] == "acquired"]
+    assert locks and locks[0]["from"] == "searching" and locks[0]["state"] == "tracking"
+    first_lock = report["first_lock_s"]
+    assert isinstance(first_lock, float) and first_lock <= 1.0
+    # it locked the walker the dome looks at (the only person in view) and keeps it centred
+    assert report["in_view_fraction"] == 1.0
+    centred = report["centred_fraction"]
+    assert isinstance(centred, float) and centred >= 0.9
+    assert tracks[-1]["state"] == "tracking"

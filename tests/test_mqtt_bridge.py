@@ -161,6 +161,32 @@ async def test_track_payload_and_rate_coalescing(broker: Broker) -> None:
         assert json.loads(lost.payload)["bbox_norm"] is None
 
 
+async def test_acquisition_transitions_survive_coalescing(broker: Broker) -> None:
+    async with (
+        subscriber(broker.port, f"{T}/track") as live,
+        MqttBridge(fast_config(broker.url, track_rate_hz=2.0), CAM) as bridge,
+    ):
+        await connected_bridge(bridge)
+        first = track(0)
+        bridge.publish_track(first)  # sent at once; the next ones wait for the rate
+        await live.wait_for(f"{T}/track", lambda m: json.loads(m.payload)["ts"] == first.ts)
+        size = (640, 480)
+        lock = {"t": 1.0, "from": "searching", "state": "tracking", "reason": "acquired",
+                "bbox": [1.0, 2.0, 3.0, 4.0]}  # fmt: skip
+        hide = {**lock, "t": 1.1, "from": "tracking", "state": "occluded", "reason": "occluded"}
+        bridge.publish_track(TrackMessage(ts=1.0, state="tracking", frame_size=size,
+                                          transitions=(lock,)))  # fmt: skip
+        bridge.publish_track(TrackMessage(ts=1.1, state="occluded", frame_size=size,
+                                          transitions=(hide,)))  # fmt: skip
+        bridge.publish_track(TrackMessage(ts=1.2, state="occluded", frame_size=size))
+        last = await live.wait_for(f"{T}/track", lambda m: json.loads(m.payload)["ts"] == 1.2)
+        body = json.loads(last.payload)
+        # the two middle messages were coalesced away, their transitions were not
+        assert [m for m in live.on(f"{T}/track") if json.loads(m.payload)["ts"] in (1.0, 1.1)] == []
+        assert body["transitions"] == [lock, hide]
+        assert "transitions" not in json.loads(live.on(f"{T}/track")[0].payload)
+
+
 async def _next_command(bridge: MqttBridge) -> object:
     async with asyncio.timeout(5):
         async for command in bridge.commands():

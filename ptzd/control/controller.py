@@ -131,17 +131,21 @@ class PtzController:
             return self._track(track, now, dt, hfov, zoom=False, mode="coast")
         return self._track(track, now, dt, hfov)
 
+    def go_home(self) -> Preset | None:
+        """The home preset to go to now, once per loss (None without one or if already sent)."""
+        home = self.config.lost.home_preset
+        if not home or self._went_home:
+            return None
+        self._went_home = True
+        self.zoom.layer = 0
+        return Preset(PresetAction.GOTO, home)
+
     def _lost(self, now: float, track_time: float) -> ControlDecision:
         self._rest()
         if self._lost_since is None:
             self._lost_since = now
-        home = self.config.lost.home_preset
-        if home and not self._went_home and now - self._lost_since >= self.config.lost.hold_s:
-            self._went_home = True
-            self.zoom.layer = 0
-            return ControlDecision(
-                STOP, "home", preset=Preset(PresetAction.GOTO, home), track_time=track_time
-            )
+        if now - self._lost_since >= self.config.lost.hold_s and (preset := self.go_home()):
+            return ControlDecision(STOP, "home", preset=preset, track_time=track_time)
         return ControlDecision(STOP, "lost", track_time=track_time)
 
     def _track(

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import random
 import ssl
@@ -160,6 +161,9 @@ class MqttBridge:
             return
         if self._track is not None:
             self.stats.tracks_coalesced += 1
+            if self._track.transitions:  # the state changes survive coalescing
+                carried = self._track.transitions + msg.transitions
+                msg = dataclasses.replace(msg, transitions=carried)
         self._track = msg
         self._poke()
 

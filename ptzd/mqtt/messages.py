@@ -92,6 +92,9 @@ class TrackMessage:
     bbox: BBox | None = None
     confidence: float | None = None
     velocity: tuple[float, float] | None = None
+    # acquisition state changes since the previous message (`Transition.to_dict()`):
+    # {"t", "from", "state", "reason", "bbox"}; the key is left out when there are none
+    transitions: tuple[dict[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         try:
@@ -123,6 +126,8 @@ class TrackMessage:
             "velocity": rounded(self.velocity, 1),
             "frame_size": list(self.frame_size),
         }
+        if self.transitions:
+            body["transitions"] = list(self.transitions)
         return json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
 
 

@@ -41,7 +41,7 @@ class AcqState(StrEnum):
 
 @dataclass(frozen=True)
 class TrackResult:
-    """The tracker's view of the locked target this frame."""
+    """The tracker's view of the locked target this frame: `box` None once it gave up."""
 
     box: Box | None
     occluded: bool = False
@@ -99,6 +99,9 @@ class _Target:
     anchor: Box
     anchor_t: float
     confirmed_t: float
+    # chosen by an operator (MQTT select, `--init`): never switched away from by policy,
+    # never dropped as static; only the tracker losing it for good ends it
+    pinned: bool = False
     history: list[Transition] = field(default_factory=list)
 
 
@@ -260,6 +263,14 @@ class Acquirer:
 
     # -- the update -----------------------------------------------------------------------
 
+    def select(self, now: float, box: Box) -> Decision:
+        """An operator's target (or the initial box): lock it now, pinned (see `_Target`)."""
+        out: list[Transition] = []
+        self._lock(now, box, "selected", out)
+        assert self._target is not None
+        self._target.pinned = True
+        return Decision(self._state, box, box, transitions=tuple(out))
+
     def reset(self, now: float) -> Decision:
         """Forget everything and start searching (e.g. autotrack switched back on)."""
         out: list[Transition] = []
@@ -302,11 +313,21 @@ class Acquirer:
                 self._last_box = track.box
                 self._go(now, AcqState.TRACKING, "recovered", out)
             else:
+                # while the tracker still searches on its own (a box, occluded) it is left to
+                # it: a detection near the last box is often someone else passing
+                gave_up = track is None or track.box is None
                 reach = 1.0 if state is AcqState.OCCLUDED else 2.0
-                found = self._near_last(detections, reach) if detections else None
+                found = self._near_last(detections, reach) if detections and gave_up else None
                 if found is not None:
+                    pinned = self._target is not None and self._target.pinned
                     lock_box = self._lock(now, found, "reidentified", out)
-                elif state is AcqState.LOST and (acq := self._try_acquire(now, out)) is not None:
+                    assert self._target is not None
+                    self._target.pinned = pinned  # still the operator's target
+                elif (
+                    state is AcqState.LOST
+                    and gave_up
+                    and (acq := self._try_acquire(now, out)) is not None
+                ):
                     lock_box = acq
                 elif state is AcqState.OCCLUDED and now - self._since >= cfg.occluded_timeout_s:
                     self._go(now, AcqState.LOST, "occlusion_timeout", out)
@@ -362,6 +383,8 @@ class Acquirer:
             iou(d.box, track.box) >= cfg.confirm_iou for d in detections
         ):
             target.confirmed_t = now
+        if target.pinned:
+            return None
         if (
             not camera_moving
             and now - target.anchor_t >= cfg.static_s

@@ -15,6 +15,8 @@ from ptzd.schema import StrictModel
 class AcquisitionConfig(StrictModel):
     """How a target is chosen, confirmed, kept, dropped and given up."""
 
+    # Run the detector and this state machine in the daemon (off: only selected targets)
+    enabled: bool = True
     policy: Literal["largest", "center", "zone"] = "largest"
     zone: tuple[float, float, float, float] | None = None
     persist_frames: int = Field(default=3, ge=1, le=100)

@@ -92,9 +92,7 @@ def _detect(args: argparse.Namespace) -> int:
     import cv2
 
     from ptzd.sim.sources import open_wide_source
-    from ptzd.vision.detect.codebook import CodebookError
-    from ptzd.vision.detect.factory import make_detector
-    from ptzd.vision.detect.hog import DetectorUnavailableError
+    from ptzd.vision.detect.factory import build_detector
 
     config = _detector_config(args.config)
     updates: dict[str, Any] = {}
@@ -104,10 +102,7 @@ def _detect(args: argparse.Namespace) -> int:
     if args.codebook:
         updates["bgcode"] = config.bgcode.model_copy(update={"codebook": args.codebook})
     config = config.model_copy(update=updates)
-    try:
-        detector = make_detector(config)
-    except (DetectorUnavailableError, CodebookError) as exc:
-        raise UsageError(str(exc)) from None
+    detector = build_detector(config)
     source = open_wide_source(args.video)
     count = source.frame_count
     if args.max_frames is not None:

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ptzd.errors import UsageError
 from ptzd.vision.detect.bgcode import BackgroundCodebookDetector
-from ptzd.vision.detect.codebook import Codebook
+from ptzd.vision.detect.codebook import Codebook, CodebookError
 from ptzd.vision.detect.config import DetectorConfig
 from ptzd.vision.detect.hog import DetectorUnavailableError, HogPeopleDetector, hog_available
 from ptzd.vision.detect.types import Detection, Detector, Frame
@@ -50,3 +51,12 @@ def make_detector(config: DetectorConfig) -> Detector:
     if config.when_moving == "hog":
         return StillOrMovingDetector(still, HogPeopleDetector(config.hog))
     return still
+
+
+def build_detector(config: DetectorConfig) -> Detector:
+    """`make_detector` for a command line: a detector that cannot be built is a `UsageError`
+    (one line naming the codebook file or the missing OpenCV module, exit 2)."""
+    try:
+        return make_detector(config)
+    except (DetectorUnavailableError, CodebookError) as exc:
+        raise UsageError(str(exc)) from None
