@@ -18,7 +18,7 @@ if "$venv/bin/python" -m pip show opencv-python-headless >/dev/null 2>&1; then
   "$venv/bin/python" -m pip uninstall --quiet -y opencv-python-headless
 fi
 "${pip[@]}" "opencv-contrib-python-headless>=4.8" "numpy>=1.26" "matplotlib>=3.7" \
-  "pydantic>=2.6,<3" "structlog>=24.1" "pyserial>=3.5"
+  "pydantic>=2.6,<3" "structlog>=24.1" "pyserial>=3.5" "scikit-learn>=1.3"
 "${pip[@]}" --no-deps -e .
 "$venv/bin/python" - <<'PY'
 import cv2

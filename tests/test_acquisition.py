@@ -238,3 +238,20 @@ def test_reidentification_waits_until_the_tracker_gives_up_and_keeps_the_pin() -
     big = det(400, 100, 60, 160)
     for _ in range(80):  # still the operator's target: never switched
         assert run.step([big], TrackResult((120, 100, 30, 80))).lock_box is None
+
+
+def test_nobody_else_is_locked_while_a_selected_target_is_lost() -> None:
+    run = Run(occluded_timeout_s=0.5, lost_timeout_s=3.0, return_home=False)
+    run.acq.select(run.now, (100, 100, 30, 80))
+    stranger = det(500, 300)
+    states = [run.step([stranger], TrackResult(None)).state for _ in range(25)]
+    assert AcqState.LOST in states and states[-1] is AcqState.LOST  # waited for the target
+    assert all(e.reason != "acquired" for e in run.events)
+    # after lost_timeout_s the pin is gone: searching, and the stranger can be locked
+    decisions = [run.step([stranger], TrackResult(None)) for _ in range(15)]
+    assert any(d.lock_box == stranger.box for d in decisions)
+    # an acquired target's loss lets someone else in at once
+    free = Run(occluded_timeout_s=0.5)
+    free.lock(det(100, 100))
+    assert any(free.step([stranger], TrackResult(None)).lock_box == stranger.box
+               for _ in range(20))  # fmt: skip

@@ -100,7 +100,8 @@ class _Target:
     anchor_t: float
     confirmed_t: float
     # chosen by an operator (MQTT select, `--init`): never switched away from by policy,
-    # never dropped as static; only the tracker losing it for good ends it
+    # never dropped as static, and while it is lost nobody else is locked; only
+    # `lost_timeout_s` ends it
     pinned: bool = False
     history: list[Transition] = field(default_factory=list)
 
@@ -316,6 +317,7 @@ class Acquirer:
                 # while the tracker still searches on its own (a box, occluded) it is left to
                 # it: a detection near the last box is often someone else passing
                 gave_up = track is None or track.box is None
+                pinned_target = self._target is not None and self._target.pinned
                 reach = 1.0 if state is AcqState.OCCLUDED else 2.0
                 found = self._near_last(detections, reach) if detections and gave_up else None
                 if found is not None:
@@ -326,6 +328,7 @@ class Acquirer:
                 elif (
                     state is AcqState.LOST
                     and gave_up
+                    and not pinned_target  # an operator's target is waited for until timeout
                     and (acq := self._try_acquire(now, out)) is not None
                 ):
                     lock_box = acq
