@@ -64,6 +64,12 @@ def add_arguments(parser: Any) -> None:
         help="start with no target: the daemon's detector finds one (scored on the walker "
         "the dome starts pointed at)",
     )
+    parser.add_argument(
+        "--loop",
+        action="store_true",
+        help="with --acquire and --duration: play the wide source round and round (long "
+        "unattended runs; scored on the first pass)",
+    )
     parser.add_argument("--config", metavar="FILE", help="TOML config (default: built-in)")
     parser.add_argument("--mqtt-url", metavar="URL", help="publish over MQTT (mqtt://HOST:PORT)")
     parser.add_argument("--camera-name", metavar="NAME", help="camera name for MQTT topics")
@@ -104,6 +110,7 @@ class ClosedLoopOptions:
     mqtt_url: str | None = None
     camera_name: str | None = None
     acquire: bool = False  # no initial box: the daemon's own detection must lock on
+    loop: bool = False  # play the wide source round and round (needs acquire and duration)
 
     @classmethod
     def from_args(cls, args: Any) -> ClosedLoopOptions:
@@ -128,6 +135,8 @@ class ClosedLoopOptions:
             raise UsageError("--gt and --target go together")
         if args.video and args.gt is None:
             raise UsageError("--video needs --gt GT.json --target ID (the target to follow)")
+        if getattr(args, "loop", False) and not (getattr(args, "acquire", False) and args.duration):
+            raise UsageError("--loop needs --acquire and --duration S")
         if args.duration is not None and not args.duration > 0:
             raise UsageError(f"--duration must be positive; got {args.duration}")
         if args.wide_hfov is not None and not 1.0 < args.wide_hfov < 179.0:
@@ -146,6 +155,7 @@ class ClosedLoopOptions:
             mqtt_url=args.mqtt_url,
             camera_name=args.camera_name,
             acquire=bool(getattr(args, "acquire", False)),
+            loop=bool(getattr(args, "loop", False)),
         )
 
 
@@ -218,6 +228,7 @@ class _Recorder:
     epoch_of: Any  # () -> the camera's epoch (times are seconds since the run started)
     video_frame_of: Any  # index -> video frame
     stream: TextIO | None = None
+    keep: int | None = None  # records kept in `tracks` (None: all; the stream gets all)
     tracks: list[dict[str, Any]] = field(default_factory=list)
     zoom_timeline: list[tuple[float, int]] = field(default_factory=lambda: [(0.0, 0)])
     modes: dict[str, int] = field(default_factory=dict)
@@ -234,7 +245,8 @@ class _Recorder:
         }
         if item.transitions:
             record["transitions"] = [t.to_dict() for t in item.transitions]
-        self.tracks.append(record)
+        if self.keep is None or len(self.tracks) < self.keep:
+            self.tracks.append(record)
         if self.stream is not None:
             self.stream.write(json.dumps(record, separators=(",", ":")) + "\n")
 
@@ -307,7 +319,7 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
     if options.wide_hfov is not None:
         sim_cfg = sim_cfg.model_copy(update={"wide_hfov": options.wide_hfov})
     try:
-        source = open_wide_source(options.spec, gt_path=options.gt_path)
+        source = open_wide_source(options.spec, gt_path=options.gt_path, loop=options.loop)
     except (OSError, ValueError) as exc:
         raise UsageError(f"cannot open wide source {options.spec!r}: {exc}") from None
     gt = source.ground_truth
@@ -325,6 +337,11 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
     src_fps = float(source.fps)
     available = (last - first + 1) / src_fps
     duration = min(options.duration, available) if options.duration else available
+    count = source.frame_count
+    if options.loop:
+        if count is None or options.duration is None:
+            raise UsageError("--loop needs a wide source of known length and --duration")
+        duration = options.duration
 
     clock: Clock = _line_synced_clock() if options.virtual else RealClock()
     recorder = None
@@ -337,6 +354,8 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
 
         def video_frame_at(self, index: int) -> int:
             frame = first + math.floor(index * self.source.fps / self.fps + 1e-9)
+            if options.loop and count:
+                return frame % count
             if frame > last:
                 raise SourceEnded(frame)
             return frame
@@ -353,15 +372,23 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
         zoom=zoom_position(sim_cfg, pose0.hfov),
     )
     camera = RangeCamera(source, sim_cfg, clock, recorder=recorder, dome=dome)
+    # a looped run keeps per-frame records in memory only for its first pass (the scored
+    # one): a day-long run must not grow; the jsonl files still get every frame
+    keep_frames = None
+    if options.loop and count:
+        keep_frames = round((count - first) * camera.fps / src_fps)
     pose0 = dome.pose
     init_box = camera.model.box_to_view(frames[first], pose0)
     if init_box is None:
         raise UsageError(f"target {target} is not visible in the first view")
 
     rendered: list[_Rendered] = []
-    camera.listeners.append(
-        lambda f: rendered.append(_Rendered(f.t - camera.epoch, f.video_frame, f.pose, f.index))
-    )
+
+    def on_rendered(f: Any) -> None:
+        if keep_frames is None or len(rendered) < keep_frames:
+            rendered.append(_Rendered(f.t - camera.epoch, f.video_frame, f.pose, f.index))
+
+    camera.listeners.append(on_rendered)
     frame_source = SimFrameSource(camera)
     pty = PtyEndpoint(camera.link, clock)
     track_stream: TextIO | None = None
@@ -372,7 +399,8 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
         serial_cfg = config.serial.model_copy(
             update={"port": port, "address": sim_cfg.address, "baudrate": sim_cfg.baudrate}
         )
-        observer = _Recorder(lambda: camera.epoch, camera.video_frame_at, track_stream)
+        observer = _Recorder(lambda: camera.epoch, camera.video_frame_at, track_stream,
+                             keep=keep_frames)  # fmt: skip
         async with (
             PelcoLink(serial_cfg, clock=clock, seed=0) as link,
             optional_bridge(config.mqtt, config.camera.name) as bridge,
@@ -427,6 +455,7 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
             "stale_stops": daemon.stats.stale_stops,
             "control_modes": observer.modes,
             "acquire": options.acquire,
+            "loop": options.loop,
             # seconds from the start to the first frame with a locked target
             "first_lock_s": next(
                 (t["t"] for t in observer.tracks if t["state"] == "tracking"), None

@@ -780,7 +780,10 @@ def _round(value: float | None, digits: int = 2) -> float | None:
 
 
 async def run_virtual(options: SoakOptions) -> dict[str, Any]:
-    """`ptzd sim --virtual-clock` for N simulated minutes in a probed child process."""
+    """`ptzd sim --virtual-clock --acquire --loop` for N simulated minutes, probed.
+
+    The daemon runs unattended on the looping synthetic scene: it searches, locks, follows,
+    loses, goes home and searches again, for as long as asked."""
     out = options.report_dir
     out.mkdir(parents=True, exist_ok=True)
     probe = out / "probe.jsonl"
@@ -790,7 +793,8 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
     with (out / "sim.log").open("wb") as log:
         child = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "ptzd.soak", "probe", str(probe), "1.0", "--log-format",
-            "json", "sim", "--virtual-clock", "--duration", str(options.minutes * 60),
+            "json", "sim", "--virtual-clock", "--acquire", "--loop",
+            "--duration", str(options.minutes * 60),
             "--record", str(out / "sim"), stdout=log, stderr=log,
         )  # fmt: skip
         while child.returncode is None:
@@ -811,7 +815,7 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
     fds = [s["fds"] for s in samples if s["fds"] >= 0]
     lags = [1000 * v for v in _probe_lags(probe)]
     log_text = (out / "sim.log").read_text(errors="replace")
-    # `ptzd sim` stops when its scene ends (synthetic:0 is ~44 s): say what really ran
+    # say what really ran (the scene loops, so this is what was asked unless it failed)
     try:
         sim_report = json.loads((out / "sim" / "report.json").read_text())
         simulated = float(sim_report.get("duration_s", 0.0))

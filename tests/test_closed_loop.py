@@ -82,3 +82,40 @@ async def test_unattended_daemon_finds_the_walker_by_itself_within_a_second(
     centred = report["centred_fraction"]
     assert isinstance(centred, float) and centred >= 0.9
     assert tracks[-1]["state"] == "tracking"
+
+
+@pytest.mark.slow
+async def test_looped_unattended_run_wraps_the_scene_and_keeps_memory_bounded(
+    tmp_path: Path,
+) -> None:
+    options = ClosedLoopOptions(
+        config=validate_config({}, environ={}),
+        spec="synthetic:0",
+        duration=61.0,  # the scene is 60 s (1500 frames at 25 fps)
+        record=tmp_path,
+        virtual=True,
+        acquire=True,
+        loop=True,
+    )
+    report = await run_closed_loop(options)
+    camera = [json.loads(line) for line in (tmp_path / "camera.jsonl").read_text().splitlines()]
+    frames = [c["video_frame"] for c in camera]
+    assert len(camera) == report["frames_processed"] == 61 * 25
+    wrap = frames.index(0, 1)  # played round: frame 0 again after the last one
+    assert frames[wrap - 1] == 1499 and frames[wrap:] == list(range(len(frames) - wrap))
+    # only the first pass is kept in memory (and scored)
+    assert report["frames_rendered"] == 1500 - frames[0] and report["loop"] is True
+    assert report["track_frames"] == report["frames_rendered"]
+
+
+def test_loop_needs_acquire_and_a_duration() -> None:
+    import argparse
+
+    from ptzd.closed_loop import add_arguments
+    from ptzd.errors import UsageError
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    for argv in (["--loop", "--duration", "5"], ["--loop", "--acquire"]):
+        with pytest.raises(UsageError, match="--loop needs"):
+            ClosedLoopOptions.from_args(parser.parse_args(argv))
