@@ -13,15 +13,25 @@ from ptzd.config import validate_config
 pytest.importorskip("ptzd.sim.scene", reason="the synthetic scene is not available")
 
 
-async def _run(record: Path, seed: int = 0, duration: float = 4.0) -> dict[str, object]:
-    options = ClosedLoopOptions(
-        config=validate_config({}, environ={}),
-        spec=f"synthetic:{seed}",
-        duration=duration,
-        record=record,
-        virtual=True,
+async def _run(
+    record: Path,
+    seed: int = 0,
+    duration: float = 4.0,
+    *,
+    acquire: bool = False,
+    loop: bool = False,
+) -> dict[str, object]:
+    return await run_closed_loop(
+        ClosedLoopOptions(
+            config=validate_config({}, environ={}),
+            spec=f"synthetic:{seed}",
+            duration=duration,
+            record=record,
+            virtual=True,
+            acquire=acquire,
+            loop=loop,
+        )
     )
-    return await run_closed_loop(options)
 
 
 @pytest.mark.slow
@@ -61,15 +71,7 @@ async def test_virtual_closed_loop_keeps_the_walker_centred_and_is_deterministic
 async def test_unattended_daemon_finds_the_walker_by_itself_within_a_second(
     tmp_path: Path,
 ) -> None:
-    options = ClosedLoopOptions(
-        config=validate_config({}, environ={}),
-        spec="synthetic:0",
-        duration=4.0,
-        record=tmp_path,
-        virtual=True,
-        acquire=True,
-    )
-    report = await run_closed_loop(options)
+    report = await _run(tmp_path, acquire=True)
     tracks = [json.loads(line) for line in (tmp_path / "track.jsonl").read_text().splitlines()]
     # no target at first: searching, no box, and the dome is not driven
     assert tracks[0]["state"] == "searching" and tracks[0]["box"] is None
@@ -88,16 +90,8 @@ async def test_unattended_daemon_finds_the_walker_by_itself_within_a_second(
 async def test_looped_unattended_run_wraps_the_scene_and_keeps_memory_bounded(
     tmp_path: Path,
 ) -> None:
-    options = ClosedLoopOptions(
-        config=validate_config({}, environ={}),
-        spec="synthetic:0",
-        duration=61.0,  # the scene is 60 s (1500 frames at 25 fps)
-        record=tmp_path,
-        virtual=True,
-        acquire=True,
-        loop=True,
-    )
-    report = await run_closed_loop(options)
+    # the scene is 60 s (1500 frames at 25 fps)
+    report = await _run(tmp_path, duration=61.0, acquire=True, loop=True)
     camera = [json.loads(line) for line in (tmp_path / "camera.jsonl").read_text().splitlines()]
     frames = [c["video_frame"] for c in camera]
     assert len(camera) == report["frames_processed"] == 61 * 25
