@@ -96,7 +96,7 @@ class TrackItem:
     acquired: BoxTuple | None = None  # set on the first result of a newly selected target
     generation: int = 0  # the target selection this track belongs to
     # with acquisition: its state (searching, tracking, occluded, lost, returning_home),
-    # the transitions made on this frame, and whether to send the dome home now
+    # the transitions made on this frame, and whether it sent the dome home
     state: str | None = None
     transitions: tuple[Transition, ...] = ()
     go_home: bool = False
@@ -179,6 +179,8 @@ class Daemon:
         # with a detector (and `acquisition.enabled`) the daemon finds people by itself
         self.detector = detector if config.acquisition.enabled else None
         self.acquirer: Acquirer | None = None  # built on the first frame (its size)
+        self._acquiring = True  # acquisition runs (not paused by a manual command)
+        self._home_requested = False  # acquisition gave up: control sends the home preset
         self.notifier = notifier
         self.heartbeats = Heartbeats(("frame", "control"), clock=clock)
         self.health_max_age_s = health_max_age_s
@@ -395,7 +397,15 @@ class Daemon:
                                               decision))  # fmt: skip
                     previous = (frame, pose)
                     continue
-                if self.acquirer is None and (tracker is None or previous is None):
+                # a manual command (or autotrack OFF) pauses acquisition too; it resumes from
+                # scratch, the dome having been moved by hand meanwhile
+                auto = self.acquirer is not None and not self._manual
+                if self.acquirer is not None and auto != self._acquiring:
+                    self._acquiring = auto
+                    if auto and self.detector is not None:
+                        self.detector.reset()
+                        self.acquirer.reset(frame.capture_time)
+                if not auto and (tracker is None or previous is None):
                     continue
                 before = previous[1] if previous is not None else pose
                 result = None
@@ -403,7 +413,7 @@ class Daemon:
                     result = await self._blocking(self._track_step, tracker, frame, pose, before)
                 decision = None
                 acquired: BoxTuple | None = None
-                if self.acquirer is not None:
+                if auto and self.acquirer is not None:
                     decision = await self._blocking(self._acquire_step, frame, pose, before, result)
                     if decision.lock_box is not None:  # a new target, or the old one re-found
                         box = decision.lock_box
@@ -416,6 +426,8 @@ class Daemon:
                             generation = self._generation
                     elif decision.state in (AcqState.SEARCHING, AcqState.RETURNING_HOME):
                         tracker, result = None, None  # given up (or dropped as static)
+                    if decision.go_home:
+                        self._home_requested = True  # for control; survives a replaced track
                 velocity = (0.0, 0.0)
                 if result is not None and previous is not None:
                     dt = frame.capture_time - previous[0].capture_time
@@ -582,7 +594,8 @@ class Daemon:
         commands: list[Command] = []
         if decision.preset is not None:
             commands.append(decision.preset)
-        elif fresh is not None and fresh.go_home and self.controller is not None:
+        elif self._home_requested and self.controller is not None:
+            self._home_requested = False
             home = self.controller.go_home()  # acquisition gave up on the target
             if home is not None:
                 commands.append(home)

@@ -14,12 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ptzd.app import Daemon
+from ptzd.app import Daemon, TrackItem
 from ptzd.capture import FrameItem
 from ptzd.clock import RealClock
 from ptzd.config import Config, validate_config
 from ptzd.pelco.codec import FrameParser, Motion
 from ptzd.pelco.link import PelcoLink
+from ptzd.vision.detect.types import Detection
 from ptzd.vision.tracking import Tracker, TrackResult, make_tracker
 
 SIZE = (320, 240)
@@ -242,3 +243,72 @@ async def test_manual_mqtt_commands_pause_tracking_and_are_not_overridden() -> N
     assert move_left in during
     assert all(m == move_left for m in during[during.index(move_left) :])
     assert after == [Motion()]
+
+
+class RedBlobDetector:
+    """A real (tiny) detector for `scene`: the bounding box of the strongly red pixels."""
+
+    name = "red-blob"
+
+    def __init__(self) -> None:
+        self.resets = 0
+
+    def reset(self) -> None:
+        self.resets += 1
+
+    def detect(self, frame: np.ndarray, *, camera_moving: bool = False) -> list[Detection]:
+        ys, xs = np.nonzero((frame[:, :, 2] > 200) & (frame[:, :, 0] < 60))
+        if len(xs) == 0:
+            return []
+        x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+        return [Detection(float(x0), float(y0), float(x1 - x0), float(y1 - y0), 0.9)]
+
+
+async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() -> None:
+    from ptzd.mqtt.messages import SetAutotrack
+
+    clock = RealClock()
+    detector = RedBlobDetector()
+    items: list[TrackItem] = []
+
+    class Observer:
+        def on_track(self, item: TrackItem) -> None:
+            items.append(item)
+
+        def on_decision(self, decision: object, now: float, zoom_layer: int) -> None:
+            pass
+
+    with pty_pair() as (master, port):
+        cfg = config(port)
+        async with PelcoLink(cfg.serial, clock=clock) as link:
+            daemon = Daemon(cfg, source=MovingTarget(clock, speed=4.0), link=link, clock=clock,
+                            tracker_factory=lambda: make_tracker(cfg.tracker),
+                            detector=detector, observer=Observer())  # fmt: skip
+            task = asyncio.create_task(daemon.run())
+            await asyncio.sleep(1.0)
+            found = read_motions(master)
+            daemon.handle_command(SetAutotrack(False))
+            await asyncio.sleep(0.2)
+            read_motions(master)  # the STOP of the switch-off
+            off_from = len(items)
+            await asyncio.sleep(0.8)
+            paused = read_motions(master)
+            on_from = len(items)
+            daemon.handle_command(SetAutotrack(True))
+            await asyncio.sleep(1.0)
+            resumed = read_motions(master)
+            daemon.request_stop()
+            await asyncio.wait_for(task, 10)
+    # no initial box: searching first, then locked by the detector within a second
+    assert items[0].published_state == "searching" and items[0].result is None
+    reasons = [t.reason for item in items for t in item.transitions]
+    assert reasons[0] == "acquired"
+    assert any(m.pan > 0 for m in found)  # the target walks right: so does the dome
+    # autotrack OFF: nothing is locked again and the dome is left alone
+    assert all(m == Motion() for m in paused)
+    assert all(item.result is None for item in items[off_from:on_from])
+    assert not any(t.reason == "acquired" for it in items[off_from:on_from] for t in it.transitions)
+    # autotrack ON again: acquisition starts afresh (detector reset) and follows again
+    assert detector.resets >= 1
+    assert reasons.count("acquired") >= 2
+    assert any(m.pan > 0 for m in resumed)
