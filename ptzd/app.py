@@ -383,6 +383,15 @@ class Daemon:
                     tracker, previous, self._drop_target = None, None, False
                     if self.acquirer is not None:
                         self.acquirer.reset(frame.capture_time)
+                # a manual command (or autotrack OFF) pauses acquisition too; it resumes from
+                # scratch, the dome having been moved by hand meanwhile (and before a select
+                # that ends the pause is applied, so the selected target survives)
+                auto = self.acquirer is not None and not self._manual
+                if self.acquirer is not None and auto != self._acquiring:
+                    self._acquiring = auto
+                    if auto and self.detector is not None:
+                        self.detector.reset()
+                        self.acquirer.reset(frame.capture_time)
                 if self._pending_box is not None:
                     box, self._pending_box = self._pending_box, None
                     generation = self._generation
@@ -397,14 +406,6 @@ class Daemon:
                                               decision))  # fmt: skip
                     previous = (frame, pose)
                     continue
-                # a manual command (or autotrack OFF) pauses acquisition too; it resumes from
-                # scratch, the dome having been moved by hand meanwhile
-                auto = self.acquirer is not None and not self._manual
-                if self.acquirer is not None and auto != self._acquiring:
-                    self._acquiring = auto
-                    if auto and self.detector is not None:
-                        self.detector.reset()
-                        self.acquirer.reset(frame.capture_time)
                 if not auto and (tracker is None or previous is None):
                     continue
                 before = previous[1] if previous is not None else pose

@@ -245,6 +245,19 @@ async def test_manual_mqtt_commands_pause_tracking_and_are_not_overridden() -> N
     assert after == [Motion()]
 
 
+class ItemLog:
+    """Daemon observer keeping every published track item."""
+
+    def __init__(self) -> None:
+        self.items: list[TrackItem] = []
+
+    def on_track(self, item: TrackItem) -> None:
+        self.items.append(item)
+
+    def on_decision(self, decision: object, now: float, zoom_layer: int) -> None:
+        pass
+
+
 class RedBlobDetector:
     """A real (tiny) detector for `scene`: the bounding box of the strongly red pixels."""
 
@@ -269,21 +282,15 @@ async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() 
 
     clock = RealClock()
     detector = RedBlobDetector()
-    items: list[TrackItem] = []
-
-    class Observer:
-        def on_track(self, item: TrackItem) -> None:
-            items.append(item)
-
-        def on_decision(self, decision: object, now: float, zoom_layer: int) -> None:
-            pass
+    log = ItemLog()
+    items = log.items
 
     with pty_pair() as (master, port):
         cfg = config(port)
         async with PelcoLink(cfg.serial, clock=clock) as link:
             daemon = Daemon(cfg, source=MovingTarget(clock, speed=4.0), link=link, clock=clock,
                             tracker_factory=lambda: make_tracker(cfg.tracker),
-                            detector=detector, observer=Observer())  # fmt: skip
+                            detector=detector, observer=log)  # fmt: skip
             task = asyncio.create_task(daemon.run())
             await asyncio.sleep(1.0)
             found = read_motions(master)
@@ -312,3 +319,31 @@ async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() 
     assert detector.resets >= 1
     assert reasons.count("acquired") >= 2
     assert any(m.pan > 0 for m in resumed)
+
+
+async def test_a_select_after_a_manual_move_is_kept_with_acquisition_on() -> None:
+    from ptzd.mqtt.messages import Move, MoveDirection, SelectTarget
+
+    clock = RealClock()
+    log = ItemLog()
+    items = log.items
+
+    with pty_pair() as (_master, port):
+        cfg = config(port)
+        async with PelcoLink(cfg.serial, clock=clock) as link:
+            daemon = Daemon(cfg, source=MovingTarget(clock, speed=2.0), link=link, clock=clock,
+                            tracker_factory=lambda: make_tracker(cfg.tracker),
+                            detector=RedBlobDetector(), observer=log)  # fmt: skip
+            task = asyncio.create_task(daemon.run())
+            await asyncio.sleep(0.5)
+            daemon.handle_command(Move(MoveDirection.UP))
+            await asyncio.sleep(0.3)
+            selected_from = len(items)
+            daemon.handle_command(SelectTarget((170.0, 90.0, 20.0, 60.0)))
+            await asyncio.sleep(0.8)
+            daemon.request_stop()
+            await asyncio.wait_for(task, 10)
+    after = items[selected_from:]
+    reasons = [t.reason for item in after for t in item.transitions]
+    assert reasons[:1] == ["selected"] and "reset" not in reasons
+    assert after and all(item.published_state == "tracking" for item in after)
