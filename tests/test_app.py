@@ -277,35 +277,43 @@ class RedBlobDetector:
         return [Detection(float(x0), float(y0), float(x1 - x0), float(y1 - y0), 0.9)]
 
 
-async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() -> None:
-    from ptzd.mqtt.messages import SetAutotrack
-
+@contextlib.asynccontextmanager
+async def acquiring_daemon(
+    speed: float, detector: RedBlobDetector, log: ItemLog
+) -> AsyncIterator[tuple[Daemon, int]]:
+    """A running daemon with no initial box and a detector; stopped in order on exit."""
     clock = RealClock()
-    detector = RedBlobDetector()
-    log = ItemLog()
-    items = log.items
-
     with pty_pair() as (master, port):
         cfg = config(port)
         async with PelcoLink(cfg.serial, clock=clock) as link:
-            daemon = Daemon(cfg, source=MovingTarget(clock, speed=4.0), link=link, clock=clock,
+            daemon = Daemon(cfg, source=MovingTarget(clock, speed=speed), link=link, clock=clock,
                             tracker_factory=lambda: make_tracker(cfg.tracker),
                             detector=detector, observer=log)  # fmt: skip
             task = asyncio.create_task(daemon.run())
-            await asyncio.sleep(1.0)
-            found = read_motions(master)
-            daemon.handle_command(SetAutotrack(False))
-            await asyncio.sleep(0.2)
-            read_motions(master)  # the STOP of the switch-off
-            off_from = len(items)
-            await asyncio.sleep(0.8)
-            paused = read_motions(master)
-            on_from = len(items)
-            daemon.handle_command(SetAutotrack(True))
-            await asyncio.sleep(1.0)
-            resumed = read_motions(master)
+            yield daemon, master
             daemon.request_stop()
             await asyncio.wait_for(task, 10)
+
+
+async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() -> None:
+    from ptzd.mqtt.messages import SetAutotrack
+
+    detector = RedBlobDetector()
+    log = ItemLog()
+    items = log.items
+    async with acquiring_daemon(4.0, detector, log) as (daemon, master):
+        await asyncio.sleep(1.0)
+        found = read_motions(master)
+        daemon.handle_command(SetAutotrack(False))
+        await asyncio.sleep(0.2)
+        read_motions(master)  # the STOP of the switch-off
+        off_from = len(items)
+        await asyncio.sleep(0.8)
+        paused = read_motions(master)
+        on_from = len(items)
+        daemon.handle_command(SetAutotrack(True))
+        await asyncio.sleep(1.0)
+        resumed = read_motions(master)
     # no initial box: searching first, then locked by the detector within a second
     assert items[0].published_state == "searching" and items[0].result is None
     reasons = [t.reason for item in items for t in item.transitions]
@@ -324,25 +332,15 @@ async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() 
 async def test_a_select_after_a_manual_move_is_kept_with_acquisition_on() -> None:
     from ptzd.mqtt.messages import Move, MoveDirection, SelectTarget
 
-    clock = RealClock()
     log = ItemLog()
     items = log.items
-
-    with pty_pair() as (_master, port):
-        cfg = config(port)
-        async with PelcoLink(cfg.serial, clock=clock) as link:
-            daemon = Daemon(cfg, source=MovingTarget(clock, speed=2.0), link=link, clock=clock,
-                            tracker_factory=lambda: make_tracker(cfg.tracker),
-                            detector=RedBlobDetector(), observer=log)  # fmt: skip
-            task = asyncio.create_task(daemon.run())
-            await asyncio.sleep(0.5)
-            daemon.handle_command(Move(MoveDirection.UP))
-            await asyncio.sleep(0.3)
-            selected_from = len(items)
-            daemon.handle_command(SelectTarget((170.0, 90.0, 20.0, 60.0)))
-            await asyncio.sleep(0.8)
-            daemon.request_stop()
-            await asyncio.wait_for(task, 10)
+    async with acquiring_daemon(2.0, RedBlobDetector(), log) as (daemon, _master):
+        await asyncio.sleep(0.5)
+        daemon.handle_command(Move(MoveDirection.UP))
+        await asyncio.sleep(0.3)
+        selected_from = len(items)
+        daemon.handle_command(SelectTarget((170.0, 90.0, 20.0, 60.0)))
+        await asyncio.sleep(0.8)
     after = items[selected_from:]
     reasons = [t.reason for item in after for t in item.transitions]
     assert reasons[:1] == ["selected"] and "reset" not in reasons
