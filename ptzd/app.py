@@ -95,11 +95,10 @@ class TrackItem:
     velocity: tuple[float, float]  # px/s, the target's own motion (ego-motion removed)
     acquired: BoxTuple | None = None  # set on the first result of a newly selected target
     generation: int = 0  # the target selection this track belongs to
-    # with acquisition: its state (searching, tracking, occluded, lost, returning_home),
-    # the transitions made on this frame, and whether it sent the dome home
+    # with acquisition: its state (searching, tracking, occluded, lost, returning_home) and
+    # the transitions made on this frame
     state: str | None = None
     transitions: tuple[Transition, ...] = ()
-    go_home: bool = False
 
     @property
     def published_state(self) -> str:
@@ -736,8 +735,7 @@ def _track_item(
     if decision is None:
         return TrackItem(result, frame, pose, velocity, acquired, generation)
     return TrackItem(result, frame, pose, velocity, acquired, generation,
-                     state=str(decision.state), transitions=decision.transitions,
-                     go_home=decision.go_home)  # fmt: skip
+                     state=str(decision.state), transitions=decision.transitions)  # fmt: skip
 
 
 def _track_input(item: TrackItem | None) -> TrackInput | None:
