@@ -67,10 +67,15 @@ class SoakOptions:
     virtual_clock: bool = False
     sample_s: float = 2.0
     warmup_s: float = 30.0
+    fps: float | None = None  # the simulated dome's frame rate (`[sim] fps`); None: the scene's
 
     def __post_init__(self) -> None:
         if not self.minutes > 0:
             raise UsageError(f"--minutes must be > 0; got {self.minutes}")
+        if self.fps is not None and not 0 < self.fps <= 240:
+            raise UsageError(f"--fps must be in (0, 240]; got {self.fps}")
+        if self.fps is not None and not self.virtual_clock:
+            raise UsageError("--fps needs --virtual-clock (the real-time soak streams at 25 fps)")
         unknown = [f for f in self.faults if f not in FAULTS]
         if unknown:
             raise UsageError(f"unknown fault(s) {unknown}; choose from {', '.join(FAULTS)}")
@@ -788,13 +793,18 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     probe = out / "probe.jsonl"
     probe.unlink(missing_ok=True)
+    config: list[str] = []
+    if options.fps is not None:
+        # a dome streaming at a lower rate: the same scene, fewer frames per simulated second
+        (out / "sim.toml").write_text(f"[sim]\nfps = {options.fps}\n")
+        config = ["--config", str(out / "sim.toml")]
     start = time.monotonic()
     samples: list[dict[str, Any]] = []
     with (out / "sim.log").open("wb") as log:
         child = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "ptzd.soak", "probe", str(probe), "1.0", "--log-format",
             "json", "sim", "--virtual-clock", "--acquire", "--loop",
-            "--duration", str(options.minutes * 60),
+            "--duration", str(options.minutes * 60), *config,
             "--record", str(out / "sim"), stdout=log, stderr=log,
         )  # fmt: skip
         while child.returncode is None:
@@ -819,11 +829,13 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
     try:
         sim_report = json.loads((out / "sim" / "report.json").read_text())
         simulated = float(sim_report.get("duration_s", 0.0))
+        frames = int(sim_report.get("frames_processed", 0))
     except (OSError, ValueError):
-        simulated = 0.0
+        simulated, frames = 0.0, 0
     summary = {
         "asked_s": options.minutes * 60,
         "simulated_s": simulated,
+        "frames_processed": frames,
         "wall_s": round(time.monotonic() - start, 1),
         "exit_code": child.returncode,
         "rss_mb_after_warmup": round(warm[0], 2) if warm else None,
@@ -834,7 +846,7 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
         "unhandled_exception": "Traceback" in log_text,
     }
     report = {
-        "options": {"minutes": options.minutes, "virtual_clock": True},
+        "options": {"minutes": options.minutes, "virtual_clock": True, "fps": options.fps},
         "summary": summary,
         "ok": child.returncode == 0
         and not summary["unhandled_exception"]

@@ -29,6 +29,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     parser.add_argument("--sample-s", type=float, default=2.0, help="sampling period (s)")
     parser.add_argument("--warmup-s", type=float, default=30.0,
                         help="RSS growth is measured from the first sample after this")  # fmt: skip
+    parser.add_argument("--fps", type=float, default=None, metavar="FPS",
+                        help="with --virtual-clock: the simulated dome's frame rate "
+                        "([sim] fps; default: the scene's 25)")  # fmt: skip
     parser.set_defaults(handler=_soak)
 
 
@@ -43,6 +46,7 @@ def _soak(args: argparse.Namespace) -> int:
         virtual_clock=args.virtual_clock,
         sample_s=args.sample_s,
         warmup_s=args.warmup_s,
+        fps=args.fps,
     )
     report = run_soak(options)
     import json

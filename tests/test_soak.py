@@ -27,6 +27,10 @@ def test_options_reject_unknown_faults_and_faults_on_the_virtual_clock(tmp_path:
         SoakOptions(minutes=1, report_dir=tmp_path, faults=FAULTS[:1], virtual_clock=True)
     with pytest.raises(UsageError, match="minutes"):
         SoakOptions(minutes=0, report_dir=tmp_path)
+    with pytest.raises(UsageError, match="--fps must be"):
+        SoakOptions(minutes=1, report_dir=tmp_path, virtual_clock=True, fps=0)
+    with pytest.raises(UsageError, match="--fps needs --virtual-clock"):
+        SoakOptions(minutes=1, report_dir=tmp_path, fps=10)
 
 
 def test_proc_sample_sees_a_new_file_descriptor() -> None:
@@ -56,13 +60,15 @@ def test_plots_draw_every_sampled_series(tmp_path: Path) -> None:
 def test_virtual_clock_soak_probes_the_sim_process(tmp_path: Path) -> None:
     run = subprocess.run(
         [sys.executable, "-m", "ptzd", "soak", "--virtual-clock", "--minutes", "0.1",
-         "--sample-s", "0.5", "--report", str(tmp_path)],
+         "--fps", "10", "--sample-s", "0.5", "--report", str(tmp_path)],
         capture_output=True, text=True, timeout=110,
     )  # fmt: skip
     assert run.returncode == 0, run.stderr[-2000:]
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["ok"] and report["summary"]["exit_code"] == 0
     assert report["summary"]["simulated_s"] >= 6.0  # the 0.1 minutes asked for really ran
+    # the dome streamed at the --fps asked for (the scene's own rate is 25)
+    assert abs(report["summary"]["frames_processed"] - 10 * report["summary"]["simulated_s"]) <= 2
     assert report["summary"]["rss_mb_end"] > 20
     assert (tmp_path / "soak.png").exists()
     probe = [json.loads(line) for line in (tmp_path / "probe.jsonl").read_text().splitlines()]
