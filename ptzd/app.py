@@ -742,7 +742,14 @@ def _track_input(item: TrackItem | None) -> TrackInput | None:
     if item is None or item.result is None:
         return None
     r = item.result
-    return TrackInput(Box(*r.box), item.velocity, r.state, r.confidence, item.frame.capture_time)
+    return TrackInput(
+        Box(*r.box),
+        item.velocity,
+        r.state,
+        r.confidence,
+        item.frame.capture_time,
+        pose_reported=item.frame.pose is not None,
+    )
 
 
 def latency_percentiles(samples: deque[float] | list[float]) -> dict[str, float | None]:

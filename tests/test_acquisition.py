@@ -255,3 +255,22 @@ def test_nobody_else_is_locked_while_a_selected_target_is_lost() -> None:
     free.lock(det(100, 100))
     assert any(free.step([stranger], TrackResult(None)).lock_box == stranger.box
                for _ in range(20))  # fmt: skip
+
+
+def test_a_partial_reidentifying_detection_keeps_the_targets_height() -> None:
+    run = Run()
+    run.acq.select(run.now, (100, 100, 30, 80))
+    run.step([], TrackResult((100, 100, 30, 80), occluded=True))
+    # stepping out from behind a bench: only head and shoulders are detected
+    decision = run.step([det(112, 98, 26, 40)], TrackResult(None))
+    assert decision.lock_box == (125.0 - 15.0, 98.0, 30.0, 80.0)  # top and centre kept
+    # a whole detection (the target came nearer meanwhile) is taken as it is
+    whole = Run()
+    whole.acq.select(whole.now, (100, 100, 30, 80))
+    whole.step([], TrackResult((100, 100, 30, 80), occluded=True))
+    assert whole.step([det(110, 96, 36, 96)], TrackResult(None)).lock_box == (110, 96, 36, 96)
+    # partial_height = 0 takes every detection as it is
+    raw = Run(partial_height=0.0)
+    raw.acq.select(raw.now, (100, 100, 30, 80))
+    raw.step([], TrackResult((100, 100, 30, 80), occluded=True))
+    assert raw.step([det(112, 98, 26, 40)], TrackResult(None)).lock_box == (112, 98, 26, 40)

@@ -8,6 +8,7 @@ import pytest
 
 from ptzd.control.config import ControlConfig, LostConfig, ZoomConfig
 from ptzd.control.controller import STOP, PtzController, TrackInput
+from ptzd.control.egomotion import rate_for_byte
 from ptzd.control.zoom import Box
 from ptzd.pelco.codec import Motion, Preset, PresetAction, Zoom
 from ptzd.vision.tracking import TrackState
@@ -132,3 +133,37 @@ def test_stale_track_aborts_a_zoom_pulse() -> None:
     ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), max_track_age_s=0.2)
     assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.0, hfov=40.0).motion.zoom == Zoom.IN
     assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.3, hfov=40.0).motion == Motion()
+
+
+def test_feedforward_turns_with_a_moving_target_inside_the_stop_band() -> None:
+    ctl = _controller()
+    hfov = 30.0
+    focal = SIZE[0] / 2 / math.tan(math.radians(hfov) / 2)
+    v = 60.0  # px/s to the right and down, the target's own motion
+    decision = ctl.update(_track(TARGET, 0.0, velocity=(v, v)), now=0.0, hfov=hfov)
+    assert decision.region is not None and decision.region.is_stop  # no correction...
+    expected = math.degrees(v / focal)  # ...but the target's own angular rate
+    pan = rate_for_byte(decision.motion.pan, ctl.config.dome)
+    tilt = rate_for_byte(decision.motion.tilt, ctl.config.dome, tilt=True)
+    assert pan == pytest.approx(expected, rel=0.07)  # one speed step of the curve is ~11 %
+    assert tilt == pytest.approx(-expected, rel=0.07)  # moving down: tilt down
+    # standing still (below feedforward_min_deg_s), or with the seed's pure PID: stop
+    assert ctl.update(_track(TARGET, 0.1, velocity=(0.5, 0.0)), now=0.1, hfov=hfov).motion == STOP
+    seed = _controller(feedforward=0.0)
+    assert seed.update(_track(TARGET, 0.0, velocity=(v, v)), now=0.0, hfov=hfov).motion == STOP
+
+
+def test_feedforward_adds_to_the_correction_and_lets_a_returning_target_come() -> None:
+    right = Box(520, 180, 40, 120)  # right of the stop band
+    still = _controller().update(_track(right, 0.0), now=0.0, hfov=30.0).motion.pan
+    along = _controller().update(_track(right, 0.0, velocity=(80.0, 0.0)), now=0.0, hfov=30.0)
+    assert along.motion.pan > still > 0  # running away: correction plus its own rate
+    back = _controller().update(_track(right, 0.0, velocity=(-400.0, 0.0)), now=0.0, hfov=30.0)
+    assert back.motion.pan == 0  # coming back to the centre faster than we would turn
+
+
+def test_feedforward_needs_a_reported_pose_unless_told_otherwise() -> None:
+    moving = TrackInput(TARGET, (60.0, 0.0), TrackState.TRACKING, 0.9, 0.0, pose_reported=False)
+    assert _controller().update(moving, now=0.0, hfov=30.0).motion == STOP
+    trusting = _controller(feedforward_dead_reckoned=True)
+    assert trusting.update(moving, now=0.0, hfov=30.0).motion.pan > 0

@@ -224,3 +224,77 @@ def test_ego_motion_is_not_counted_as_target_velocity() -> None:
     assert all(iou(r.box, scene.truth(t)) > 0.5 for t, r in enumerate(results, 1))
     assert all(r.state is TrackState.TRACKING for r in results)
     assert results[-1].velocity[0] == pytest.approx(2.0, abs=1.0)
+
+
+class _EdgeLikelihood:
+    """A target walking right at 3 px/frame hides behind a column from frame 40 to 64; the
+    column's edge, where it vanished, looks somewhat like it (similarity ~0.65, between
+    ths_sim and the re-acquire threshold). The frame's first pixel carries the frame index."""
+
+    SPEED, HIDE, SHOW, EDGE_X, Y = 3.0, 40, 65, 220.0, 120.0
+
+    def truth_x(self, t: int) -> float:
+        return 100.0 + self.SPEED * t
+
+    def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        t = int(frame[0, 0, 0])
+
+        def near(x: float) -> np.ndarray:
+            d2 = (boxes[:, 0] - x) ** 2 + (boxes[:, 1] - self.Y) ** 2
+            return np.exp(-d2 / 100.0)
+
+        edge = 0.66 * near(self.EDGE_X)
+        if self.HIDE <= t < self.SHOW:
+            return edge
+        return np.maximum(edge, 0.97 * near(self.truth_x(t)))
+
+    def init(self, frame, box):
+        pass
+
+    def log_likelihood(self, frame, boxes):
+        return 30.0 * self._score(frame, np.asarray(boxes, float))
+
+    def similarity(self, frame, box):
+        return float(self._score(frame, np.asarray(box, float)[None, :])[0])
+
+    def adapt(self, frame, box):
+        pass
+
+    def rescale(self, factor):
+        pass
+
+
+def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list]:
+    lik = _EdgeLikelihood()
+    tracker = ParticleTracker(config, lik)
+    frame = np.zeros((240, 400, 3), np.uint8)
+    tracker.init(frame, (lik.truth_x(0) - 10, lik.Y - 20, 20, 40))
+    results = []
+    for t in range(1, 80):
+        frame[0, 0, 0] = t
+        results.append(tracker.update(frame))
+    return lik, results
+
+
+def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on() -> None:
+    lik, results = _edge_run(TrackerConfig())
+    hidden = results[lik.HIDE - 1 : lik.SHOW - 1]  # results[i] is frame i + 1
+    # within a few frames of vanishing the stalled box is taken for an occlusion...
+    first = next(i for i, r in enumerate(hidden) if r.state is TrackState.OCCLUDED)
+    assert first <= 8
+    assert all(r.state is TrackState.OCCLUDED for r in hidden[first:])  # the edge never ends it
+    # ...and coasts on at the target's speed, no decay: it is near the target when it shows
+    x_last = hidden[-1].box[0] + hidden[-1].box[2] / 2
+    assert abs(x_last - lik.truth_x(lik.SHOW - 1)) < 6.0
+    assert hidden[-1].velocity[0] == pytest.approx(lik.SPEED, abs=0.5)
+    after = results[lik.SHOW + 6 :]  # back within a few frames, on the target
+    assert all(r.state is TrackState.TRACKING for r in after)
+    assert all(abs(r.box[0] + r.box[2] / 2 - lik.truth_x(t)) < 8.0
+               for t, r in enumerate(after, start=lik.SHOW + 7))  # fmt: skip
+
+
+def test_without_the_stall_test_the_tracker_stays_on_the_edge() -> None:
+    lik, results = _edge_run(TrackerConfig(occlusion={"stall_lag": 0.0}))
+    late = results[lik.SHOW - 6 : lik.SHOW - 1]
+    assert all(r.state is TrackState.TRACKING for r in late)  # the seed's ths_sim = 0.6
+    assert all(abs(r.box[0] + r.box[2] / 2 - lik.EDGE_X) < 6.0 for r in late)

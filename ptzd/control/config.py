@@ -134,6 +134,11 @@ class ControlConfig(StrictModel):
     max_track_age_s: float = Field(default=0.5, gt=0.0, le=10.0)
     refresh_s: float = Field(default=1.0, gt=0.0, le=60.0)
     lead_s: float = Field(default=0.05, ge=0.0, le=2.0)
+    # beyond the seed: turn with the target at its own angular rate (from the tracker's
+    # ego-motion-free velocity), the PID only correcting the offset; 0 = the seed's pure PID
+    feedforward: float = Field(default=1.0, ge=0.0, le=2.0)
+    feedforward_min_deg_s: float = Field(default=0.3, ge=0.0, le=100.0)
+    feedforward_dead_reckoned: bool = False  # also without a pose from the camera (see docs)
     reference_width: int = Field(default=720, ge=16, le=7680)
     reference_hfov: float = Field(default=60.0, gt=0.5, lt=179.0)
     linear_max_deg_s: float = Field(default=40.0, gt=0.0, le=1000.0)

@@ -13,6 +13,9 @@ Per update:
    is a smaller angle when zoomed in), and turned into the real dome's speed byte through its
    speed curve (`DomeModelConfig`), so the loop behaves alike on linear and exponential domes
    and at every zoom.
+   Feed-forward (beyond the seed): the target's own angular rate, from the tracker's
+   velocity with the camera's motion removed, is added on each axis, inside the stop band
+   too, so the PID only corrects the offset instead of chasing a walker stop-and-go.
 5. Zoom: `ZoomController` decides steps; a step is a zoom pulse long enough to scale the image
    by the step's factor at the dome's zoom rate (`zoom.log_rate`).
 """
@@ -43,6 +46,9 @@ class TrackInput:
     state: TrackState
     confidence: float
     capture_time: float
+    # whether the camera reported its pose with the frame (else it was dead-reckoned from the
+    # commands sent, and the velocity's camera motion removed on that belief)
+    pose_reported: bool = True
 
 
 @dataclass(frozen=True)
@@ -170,10 +176,22 @@ class PtzController:
         to_reference = cfg.reference_width / width
         scale = self.gain_scale(hfov)
         pan = self._axis_speed(
-            region.column, (cx - width / 2) * to_reference, dt, scale, tilt=False
+            region.column,
+            (cx - width / 2) * to_reference,
+            dt,
+            scale,
+            tilt=False,
+            feedforward=self._feedforward(vx, hfov, track.pose_reported),
         )
         # image y grows downwards, tilt + is up: a target below the centre needs tilt < 0
-        tilt = -self._axis_speed(region.row, (cy - height / 2) * to_reference, dt, scale, tilt=True)
+        tilt = -self._axis_speed(
+            region.row,
+            (cy - height / 2) * to_reference,
+            dt,
+            scale,
+            tilt=True,
+            feedforward=self._feedforward(vy, hfov, track.pose_reported),
+        )
 
         step: ZoomStep | None = None
         if not zoom:
@@ -208,19 +226,50 @@ class PtzController:
             predicted=(cx, cy),
         )
 
+    def _feedforward(self, v_px_s: float, hfov: float, pose_reported: bool) -> float:
+        """The target's own angular rate (deg/s) from its image velocity, times the
+        feed-forward gain; 0 below `feedforward_min_deg_s` (a standing person's jitter).
+
+        Only with a reported pose, unless `feedforward_dead_reckoned`: the velocity has the
+        camera's motion removed, and with a dead-reckoned pose that motion is what we
+        commanded, not what happened. A dome that does not move (at an end stop, or the video
+        is not from it) would make the target seem to run off with the camera, and
+        feed-forward would chase that at ever higher speed."""
+        cfg = self.config
+        if cfg.feedforward <= 0 or not (pose_reported or cfg.feedforward_dead_reckoned):
+            return 0.0
+        # degrees per pixel at the view centre: 1/f radians, f = (W/2) / tan(hfov/2)
+        focal = self.frame_size[0] / 2 / math.tan(math.radians(hfov) / 2)
+        rate = math.degrees(v_px_s / focal)
+        if abs(rate) < cfg.feedforward_min_deg_s:
+            return 0.0
+        return cfg.feedforward * rate
+
     def _axis_speed(
-        self, zone: int, error_px: float, dt: float, scale: float, *, tilt: bool
+        self,
+        zone: int,
+        error_px: float,
+        dt: float,
+        scale: float,
+        *,
+        tilt: bool,
+        feedforward: float = 0.0,
     ) -> int:
+        """Signed speed byte: the PID's correction (outside the stop band) plus the
+        feed-forward rate that matches the target's own motion (also inside it)."""
         axis_cfg = self.config.tilt if tilt else self.config.pan
         pid = self.tilt_pid if tilt else self.pan_pid
+        correction = 0.0
         if zone == 0:
             pid.reset()
-            return 0
-        c_out = pid.update(error_px, dt)
-        seed_speed = pelco_speed(c_out, offset=axis_cfg.offset, max_speed=axis_cfg.max_speed)
-        if seed_speed == 0 or (seed_speed > 0) != (zone > 0):
+        else:
+            c_out = pid.update(error_px, dt)
+            seed_speed = pelco_speed(c_out, offset=axis_cfg.offset, max_speed=axis_cfg.max_speed)
             # The PID (through its derivative) may briefly oppose the region's direction;
-            # the region decides the direction, so that reads as "not yet": stand still.
-            return 0
-        rate = seed_speed / PELCO_MAX_SPEED * self.config.linear_max_deg_s * scale
+            # the region decides the direction, so that reads as "not yet": no correction.
+            if seed_speed != 0 and (seed_speed > 0) == (zone > 0):
+                correction = seed_speed / PELCO_MAX_SPEED * self.config.linear_max_deg_s * scale
+        rate = correction + feedforward
+        if correction and feedforward and (rate > 0) != (correction > 0):
+            rate = 0.0  # a target moving back towards the centre: let it come
         return byte_for_rate(rate, self.config.dome, max_speed=axis_cfg.max_speed)

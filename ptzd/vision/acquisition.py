@@ -246,6 +246,20 @@ class Acquirer:
         self._go(now, AcqState.TRACKING, reason, out)
         return box
 
+    def _whole(self, box: Box) -> Box:
+        """A re-found target's detection at the target's known height.
+
+        Someone stepping out from behind a bench, a hedge or a pillar is often detected by
+        the visible part only (head and shoulders); tracking that part would shrink the
+        target and make the zoom close in on it. A detection shorter than `partial_height`
+        of the last box keeps its top and horizontal centre and takes the last box's size.
+        """
+        last = self._last_box
+        if last is None or box[3] >= self._cfg.partial_height * last[3]:
+            return box
+        x, y, w, _ = box
+        return (x + w / 2 - last[2] / 2, y, last[2], last[3])
+
     def _near_last(self, detections: Sequence[Detection], reach: float) -> Box | None:
         """The detection best matching the last known target box within `reach` box sizes."""
         last = self._last_box
@@ -322,7 +336,7 @@ class Acquirer:
                 found = self._near_last(detections, reach) if detections and gave_up else None
                 if found is not None:
                     pinned = self._target is not None and self._target.pinned
-                    lock_box = self._lock(now, found, "reidentified", out)
+                    lock_box = self._lock(now, self._whole(found), "reidentified", out)
                     assert self._target is not None
                     self._target.pinned = pinned  # still the operator's target
                 elif (

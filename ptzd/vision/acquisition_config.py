@@ -31,6 +31,9 @@ class AcquisitionConfig(StrictModel):
     ignore_static_s: float = Field(default=60.0, ge=0.0, le=86400.0)
     occluded_timeout_s: float = Field(default=2.0, gt=0.0, le=600.0)
     lost_timeout_s: float = Field(default=5.0, gt=0.0, le=3600.0)
+    # a re-identifying detection shorter than this share of the lost box is taken as the
+    # visible part of the target (see Acquirer._whole)
+    partial_height: float = Field(default=0.8, ge=0.0, le=1.0)
     return_home: bool = True
     home_settle_s: float = Field(default=3.0, ge=0.0, le=600.0)
 

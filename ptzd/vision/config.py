@@ -106,6 +106,16 @@ class OcclusionConfig(StrictModel):
     similarity_threshold: float = Field(default=0.6, ge=0.0, le=1.0)
     # Give up (LOST) after this many consecutive occluded frames.
     max_frames: int = Field(default=30, ge=1, le=10_000)
+    # Beyond the seed, an occluder edge: a moving target whose similarity sits between
+    # similarity_threshold and reacquire_threshold while its box falls behind its own motion
+    # by `stall_lag` box widths (summed over those frames) is behind something that looks
+    # like it, not stopping. It is then occluded: it coasts on at its speed (no decay), and
+    # only a match at reacquire_threshold ends the occlusion. 0 turns this off.
+    stall_lag: float = Field(default=0.5, ge=0.0, le=10.0)
+    # Below this speed (box widths per frame) a target is standing: no stall test.
+    stall_min_speed: float = Field(default=0.01, ge=0.0, le=1.0)
+    # ... and only while its similarity is below this share of what it usually scores
+    stall_drop: float = Field(default=0.88, gt=0.0, le=1.0)
     # While not tracking, particle centres stay within this many box sizes of the coasting box.
     search_radius: float = Field(default=1.5, gt=0.0, le=20.0)
     # While LOST keep searching and come back when similarity reaches this (beyond the seed).

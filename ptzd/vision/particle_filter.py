@@ -92,6 +92,9 @@ def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
     raise ValueError(f"ego_motion must be a shift (2,) or an invertible 3x3, got {m.shape}")
 
 
+_RECENT_FRAMES = 50
+
+
 class ParticleTracker:
     """A `Tracker` over any `Likelihood`; deterministic for a given `config.seed`."""
 
@@ -114,6 +117,10 @@ class ParticleTracker:
         self._occluded_frames = 0
         self._lost_frames = 0
         self._reacquire_hits = 0  # consecutive LOST frames whose best candidate matched
+        self._lag = 0.0  # px the box fell behind its own motion over the current grey frames
+        # similarities of the last tracked frames: what this target usually scores
+        self._recent: deque[float] = deque(maxlen=_RECENT_FRAMES)
+        self._stalled = False  # occluded by a look-alike edge (see OcclusionConfig.stall_lag)
         self._confidence = 0.0
         self._initialised = False
         self.resampled = False  # whether the last update resampled (for tests and debugging)
@@ -148,6 +155,8 @@ class ParticleTracker:
         self._likelihood.init(frame, centre)
         self._state = TrackState.TRACKING
         self._occluded_frames = 0
+        self._lag, self._stalled = 0.0, False
+        self._recent.clear()
         self._lost_frames = 0
         self._reacquire_hits = 0
         self._confidence = 1.0
@@ -181,7 +190,23 @@ class ParticleTracker:
         sim = self._likelihood.similarity(frame, candidate)
         self._confidence = sim
         was_tracking = self._state is TrackState.TRACKING
+        if was_tracking and self._stalls(candidate, sim):
+            self._stalled = True
+            sim = 0.0  # occluded from this frame on
+            # the coast starts where the target would be had it kept its speed (the coast
+            # step below adds this frame's motion), and the cloud leaves the edge with it
+            direction = self._velocity / np.hypot(*self._velocity)
+            ahead = candidate[:2] - self._lag * direction - self._velocity
+            self._particles[:, [X, Y]] += ahead - self._box[:2]
+            self._particles[:, [VX, VY]] = self._velocity
+            self._box[:2] = ahead
+        elif self._stalled and sim < self._config.occlusion.reacquire_threshold:
+            sim = 0.0  # still behind the look-alike: only a clean match ends it
         self._transition(sim)
+        if self._state is not TrackState.OCCLUDED:
+            self._stalled = False
+        if self._state is TrackState.TRACKING:
+            self._recent.append(self._confidence)
         self.resampled = False
         if self._state is TrackState.TRACKING:
             if was_lost:
@@ -234,7 +259,7 @@ class ParticleTracker:
     def _predict(self) -> None:
         p = self._particles
         noise = self._rng.standard_normal(p.shape) * self._sigmas
-        if self._state is not TrackState.TRACKING:
+        if self._state is not TrackState.TRACKING and not self._stalled:
             p[:, [VX, VY]] *= self._config.motion.occluded_velocity_decay
         if self._config.motion.model == "ar2":
             # Ko 2013 eq. 13: mean of the last two track velocities, floored to pixels
@@ -368,6 +393,27 @@ class ParticleTracker:
             TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
         )
 
+    def _stalls(self, candidate: FloatArray, similarity: float) -> bool:
+        """Whether a moving target's box is stuck on an occluder edge that resembles it."""
+        occ = self._config.occlusion
+        speed = float(np.hypot(*self._velocity))
+        width = float(self._box[2])
+        if (
+            occ.stall_lag <= 0
+            or similarity >= occ.reacquire_threshold
+            or similarity < occ.similarity_threshold
+            or speed < occ.stall_min_speed * width
+            or len(self._recent) < _RECENT_FRAMES // 2
+            # a target that always scores this low is not behind anything new
+            or similarity > occ.stall_drop * float(np.percentile(self._recent, 75))
+        ):
+            self._lag = 0.0
+            return False
+        # the step beyond the predicted one, along the direction of motion (< 0: behind)
+        ahead = float(np.dot(candidate[:2] - (self._box[:2] + self._velocity), self._velocity))
+        self._lag = min(0.0, self._lag + ahead / speed)
+        return self._lag <= -occ.stall_lag * width
+
     def _resample(self) -> None:
         n = self._config.num_particles
         idx = weighted_resample(self._weights, self._config.resampling, self._rng)
@@ -376,7 +422,13 @@ class ParticleTracker:
         self.resampled = True
 
     def _relock(self, box: FloatArray) -> None:
-        """Back from LOST at `box`: the coasting history says nothing about the target now."""
+        """Back from LOST at `box`: the coasting history says nothing about the target now.
+
+        The size stays what it was before the loss: the search scattered the particles'
+        sizes, and the best-matching one is biased small (a box on the most distinctive part
+        of the target matches as well as the whole target), which the zoom would then
+        "correct" by zooming in on that part."""
+        box[2:] = self._box[2:]
         self._box = box.copy()
         self._velocity = np.zeros(2)
         self._particles[:, [VX, VY]] = 0.0
@@ -397,7 +449,8 @@ class ParticleTracker:
         self._likelihood.adapt(frame, self._box)
 
     def _coast(self) -> None:
-        self._velocity = self._velocity * self._config.motion.occluded_velocity_decay
+        if not self._stalled:  # behind an occluder a walker walks on; otherwise slow down
+            self._velocity = self._velocity * self._config.motion.occluded_velocity_decay
         self._box[:2] = self._box[:2] + self._velocity
 
     def _result(self) -> TrackResult:
