@@ -820,10 +820,26 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(options.sample_s):
                     await child.wait()
-    rss = [s["rss_mb"] for s in samples if s["rss_mb"]]
-    warm = rss[len(rss) // 5 :] or rss
-    fds = [s["fds"] for s in samples if s["fds"] >= 0]
-    lags = [1000 * v for v in _probe_lags(probe)]
+    report = virtual_report(options, samples, child.returncode, round(time.monotonic() - start, 1))
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    draw_plots(report, out / "soak.png")
+    return report
+
+
+def virtual_report(
+    options: SoakOptions, samples: list[dict[str, Any]], exit_code: int | None, wall_s: float
+) -> dict[str, Any]:
+    """Summary and checks of a virtual-clock soak from its samples and the files in its
+    report directory (`probe.jsonl`, `sim.log`, `sim/report.json`); also run on a finished
+    run's directory to re-check it."""
+    out = options.report_dir
+    # warm-up: --warmup-s or the first fifth of the run, whichever is longer (at most half)
+    cut = min(max(options.warmup_s, 0.2 * wall_s), 0.5 * wall_s)
+    warm = [s for s in samples if s["t"] >= cut] or samples
+    rss = [s["rss_mb"] for s in warm if s.get("rss_mb")]
+    fds = [s["fds"] for s in warm if s.get("fds", -1) >= 0]
+    tasks = [s["tasks"] for s in warm if s.get("tasks") is not None]
+    lags = [1000 * v for v in _probe_lags(out / "probe.jsonl")]
     log_text = (out / "sim.log").read_text(errors="replace")
     # say what really ran (the scene loops, so this is what was asked unless it failed)
     try:
@@ -832,30 +848,38 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
         frames = int(sim_report.get("frames_processed", 0))
     except (OSError, ValueError):
         simulated, frames = 0.0, 0
+    growth = round(rss[-1] - rss[0], 2) if rss else None
     summary = {
         "asked_s": options.minutes * 60,
         "simulated_s": simulated,
         "frames_processed": frames,
-        "wall_s": round(time.monotonic() - start, 1),
-        "exit_code": child.returncode,
-        "rss_mb_after_warmup": round(warm[0], 2) if warm else None,
-        "rss_mb_end": round(warm[-1], 2) if warm else None,
-        "rss_growth_mb": round(warm[-1] - warm[0], 2) if warm else None,
+        "wall_s": wall_s,
+        "exit_code": exit_code,
+        "rss_mb_after_warmup": round(rss[0], 2) if rss else None,
+        "rss_mb_end": round(rss[-1], 2) if rss else None,
+        "rss_growth_mb": growth,
         "fds_min_max": [min(fds), max(fds)] if fds else None,
+        "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
         "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
+        "loop_lag_ms_p99": _round(_percentile(lags, 0.99)),
         "unhandled_exception": "Traceback" in log_text,
     }
-    report = {
+    # the same limits as the real-time soak's checks
+    checks = {
+        "clean_exit": exit_code == 0,
+        "simulated_what_was_asked": simulated >= 0.99 * options.minutes * 60,
+        "no_unhandled_exception": not summary["unhandled_exception"],
+        "rss_growth_below_5mb": growth is not None and growth < 5.0,
+        "no_fd_leak": bool(fds) and max(fds) - min(fds) <= 8,
+        "no_task_leak": bool(tasks) and max(tasks) - min(tasks) <= 8,
+    }
+    return {
         "options": {"minutes": options.minutes, "virtual_clock": True, "fps": options.fps},
         "summary": summary,
-        "ok": child.returncode == 0
-        and not summary["unhandled_exception"]
-        and simulated >= 0.99 * options.minutes * 60,
+        "checks": checks,
+        "ok": all(checks.values()),
         "samples": samples,
     }
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
-    draw_plots(report, out / "soak.png")
-    return report
 
 
 # --- plots ------------------------------------------------------------------------------------
