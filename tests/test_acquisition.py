@@ -274,3 +274,46 @@ def test_a_partial_reidentifying_detection_keeps_the_targets_height() -> None:
     raw.acq.select(raw.now, (100, 100, 30, 80))
     raw.step([], TrackResult((100, 100, 30, 80), occluded=True))
     assert raw.step([det(112, 98, 26, 40)], TrackResult(None)).lock_box == (112, 98, 26, 40)
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.0])
+def test_a_jittering_box_on_a_still_object_is_static_relative_to_its_size(fraction: float) -> None:
+    # the tracker's box on a still patch, big in the view, jitters by +-8 px
+    run = Run(static_s=3.0, static_fraction=fraction)
+    run.lock(det(200, 100, 120, 220))
+    states = []
+    for k in range(60):
+        jitter = 8.0 if k % 2 else -8.0
+        states.append(run.step([], TrackResult((200 + jitter, 100 - jitter, 120, 220))).state)
+    if fraction:
+        assert AcqState.SEARCHING in states and run.events[-1].reason == "static"
+    else:  # static_px alone (4 px) never sees it still
+        assert AcqState.SEARCHING not in states
+    # a walker as big, moving 0.3 box heights per second, is never static
+    walker = Run(static_s=3.0)
+    walker.lock(det(100, 100, 120, 220))
+    for k in range(60):
+        assert (
+            walker.step([], TrackResult((100 + 6.6 * k, 100, 120, 220))).state is AcqState.TRACKING
+        )
+
+
+def test_a_long_fruitless_search_away_from_home_goes_home_once() -> None:
+    run = Run(static_s=1.0, search_timeout_s=5.0, home_settle_s=1.0)
+    # searching at start (pose unknown to be away from home): no timeout
+    assert not any(run.step([]).go_home for _ in range(80))
+    # a still object locked, dropped as static: the dome may be anywhere now
+    run.lock(det(200, 200, 40, 90))
+    for _ in range(30):
+        run.step([], TrackResult((200, 200, 40, 90)))
+    assert run.events[-1].reason == "static"
+    decisions = [run.step([]) for _ in range(150)]
+    homes = [d for d in decisions if d.go_home]
+    assert len(homes) == 1 and run.events[-2].reason == "search_timeout"
+    assert decisions[-1].state is AcqState.SEARCHING  # searching at home, no more timeouts
+    # search_timeout_s = 0 never goes home on its own
+    never = Run(static_s=1.0, search_timeout_s=0.0)
+    never.lock(det(200, 200, 40, 90))
+    for _ in range(30):
+        never.step([], TrackResult((200, 200, 40, 90)))
+    assert not any(never.step([]).go_home for _ in range(150))

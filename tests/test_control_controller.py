@@ -167,3 +167,11 @@ def test_feedforward_needs_a_reported_pose_unless_told_otherwise() -> None:
     assert _controller().update(moving, now=0.0, hfov=30.0).motion == STOP
     trusting = _controller(feedforward_dead_reckoned=True)
     assert trusting.update(moving, now=0.0, hfov=30.0).motion.pan > 0
+
+
+def test_feedforward_waits_for_a_confident_track() -> None:
+    # the tracker learns its velocity only from confident frames: below that it is stale
+    unsure = TrackInput(TARGET, (60.0, 0.0), TrackState.TRACKING, 0.7, 0.0)
+    assert _controller().update(unsure, now=0.0, hfov=30.0).motion == STOP
+    lenient = _controller(feedforward_min_confidence=0.6)
+    assert lenient.update(unsure, now=0.0, hfov=30.0).motion.pan > 0

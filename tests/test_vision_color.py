@@ -169,3 +169,16 @@ def test_colour_tracker_runs_on_grey_frames() -> None:
             result = tracker.update(frame)
         assert result.state is TrackState.TRACKING
         assert abs(result.box[0] - 50.0) < 8.0
+
+
+def test_background_weights_of_a_vanishing_ring_share_are_one_without_warnings() -> None:
+    import warnings
+
+    from ptzd.vision.color import background_weights
+
+    ring = np.array([0.5, 1e-310, 0.0, 0.2])  # a share decayed to a subnormal number
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        weights = background_weights(ring)
+    assert weights[1] == 1.0 and weights[2] == 1.0
+    assert weights[0] < weights[3] < 1.0  # commoner around the target: counts less

@@ -277,7 +277,7 @@ def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list]:
 
 
 def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on() -> None:
-    lik, results = _edge_run(TrackerConfig())
+    lik, results = _edge_run(TrackerConfig(occlusion={"stall_lag": 0.5}))
     hidden = results[lik.HIDE - 1 : lik.SHOW - 1]  # results[i] is frame i + 1
     # within a few frames of vanishing the stalled box is taken for an occlusion...
     first = next(i for i, r in enumerate(hidden) if r.state is TrackState.OCCLUDED)
@@ -294,7 +294,7 @@ def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on(
 
 
 def test_without_the_stall_test_the_tracker_stays_on_the_edge() -> None:
-    lik, results = _edge_run(TrackerConfig(occlusion={"stall_lag": 0.0}))
+    lik, results = _edge_run(TrackerConfig())  # off by default
     late = results[lik.SHOW - 6 : lik.SHOW - 1]
     assert all(r.state is TrackState.TRACKING for r in late)  # the seed's ths_sim = 0.6
     assert all(abs(r.box[0] + r.box[2] / 2 - lik.EDGE_X) < 6.0 for r in late)

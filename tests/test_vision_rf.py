@@ -226,3 +226,19 @@ def test_cli_track_rf_on_a_real_encoded_video(tmp_path: Path) -> None:
     boxes = data["boxes"]
     assert len(boxes) == 25
     assert np.mean([iou(tuple(boxes[str(t)]), scene.truth(t)) for t in range(1, 25)]) > 0.5
+
+
+@pytest.mark.parametrize("coast", [True, False])
+def test_a_target_walking_on_behind_an_occluder_is_found_only_when_coasting(coast: bool) -> None:
+    # 3 px/frame to the right, hidden by a 40 px bar for ~12 frames: it comes out 36+ px
+    # from where it vanished, beyond the seed's frozen particles (sigma_xy 6.4 around them)
+    scene = Scene(velocity=(3.0, 0.0), occluder_x=(130, 170))
+    tracker = RfTracker(TrackerConfig(kind="rf", rf=RfConfig(coast=coast)))
+    tracker.init(_grey_scene(scene, 0), scene.truth(0))
+    results = [tracker.update(_grey_scene(scene, t)) for t in range(1, 60)]
+    assert any(r.state is not TrackState.TRACKING for r in results[15:35])  # it was hidden
+    late = [iou(r.box, scene.truth(t)) for t, r in enumerate(results[45:], start=46)]
+    if coast:
+        assert np.mean(late) > 0.5 and results[-1].state is TrackState.TRACKING
+    else:
+        assert np.mean(late) < 0.1  # the seed's search stays where the target vanished

@@ -181,7 +181,7 @@ class PtzController:
             dt,
             scale,
             tilt=False,
-            feedforward=self._feedforward(vx, hfov, track.pose_reported),
+            feedforward=self._feedforward(vx, hfov, track),
         )
         # image y grows downwards, tilt + is up: a target below the centre needs tilt < 0
         tilt = -self._axis_speed(
@@ -190,7 +190,7 @@ class PtzController:
             dt,
             scale,
             tilt=True,
-            feedforward=self._feedforward(vy, hfov, track.pose_reported),
+            feedforward=self._feedforward(vy, hfov, track),
         )
 
         step: ZoomStep | None = None
@@ -226,7 +226,7 @@ class PtzController:
             predicted=(cx, cy),
         )
 
-    def _feedforward(self, v_px_s: float, hfov: float, pose_reported: bool) -> float:
+    def _feedforward(self, v_px_s: float, hfov: float, track: TrackInput) -> float:
         """The target's own angular rate (deg/s) from its image velocity, times the
         feed-forward gain; 0 below `feedforward_min_deg_s` (a standing person's jitter).
 
@@ -236,7 +236,9 @@ class PtzController:
         is not from it) would make the target seem to run off with the camera, and
         feed-forward would chase that at ever higher speed."""
         cfg = self.config
-        if cfg.feedforward <= 0 or not (pose_reported or cfg.feedforward_dead_reckoned):
+        if cfg.feedforward <= 0 or not (track.pose_reported or cfg.feedforward_dead_reckoned):
+            return 0.0
+        if track.confidence < cfg.feedforward_min_confidence:
             return 0.0
         # degrees per pixel at the view centre: 1/f radians, f = (W/2) / tan(hfov/2)
         focal = self.frame_size[0] / 2 / math.tan(math.radians(hfov) / 2)

@@ -137,6 +137,9 @@ class Acquirer:
         self._target: _Target | None = None
         self._last_box: Box | None = None
         self._last_detection_t = -math.inf
+        # the dome followed a target since it was last sent home (so a long fruitless search
+        # is probably happening somewhere odd: zoomed in, or where nobody walks)
+        self._away_from_home = False
 
     @property
     def state(self) -> AcqState:
@@ -238,6 +241,7 @@ class Acquirer:
             self._on_transition(transition)
 
     def _lock(self, now: float, box: Box, reason: str, out: list[Transition]) -> Box:
+        self._away_from_home = True
         self._target = _Target(box, now, box, now, now)
         self._last_box = box
         self._candidates = [
@@ -315,6 +319,15 @@ class Acquirer:
 
         if state is AcqState.SEARCHING:
             lock_box = self._try_acquire(now, out)
+            if (
+                lock_box is None
+                and cfg.return_home
+                and cfg.search_timeout_s > 0
+                and self._away_from_home
+                and now - self._since >= cfg.search_timeout_s
+            ):
+                go_home = True
+                self._go(now, AcqState.RETURNING_HOME, "search_timeout", out)
 
         elif state is AcqState.TRACKING:
             lock_box = self._keep_tracking(now, detections, track, camera_moving, out)
@@ -358,6 +371,7 @@ class Acquirer:
                         self._go(now, AcqState.SEARCHING, "lost_timeout", out)
 
         elif state is AcqState.RETURNING_HOME and now - self._since >= cfg.home_settle_s:
+            self._away_from_home = False
             self._candidates = []
             self._go(now, AcqState.SEARCHING, "home_reached", out)
 
@@ -394,7 +408,8 @@ class Acquirer:
             return None
         target.box = track.box
         self._last_box = track.box
-        if camera_moving or _moved(track.box, target.anchor) > cfg.static_px:
+        still_px = max(cfg.static_px, cfg.static_fraction * track.box[3])
+        if camera_moving or _moved(track.box, target.anchor) > still_px:
             target.anchor, target.anchor_t = track.box, now
         if detections is not None and any(
             iou(d.box, track.box) >= cfg.confirm_iou for d in detections

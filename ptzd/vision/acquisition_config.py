@@ -28,6 +28,9 @@ class AcquisitionConfig(StrictModel):
     confirm_iou: float = Field(default=0.2, gt=0.0, le=1.0)
     static_s: float = Field(default=10.0, gt=0.0, le=3600.0)
     static_px: float = Field(default=4.0, ge=0.0, le=1000.0)
+    # ... or this share of the box height, if more: a tracker's box on a still object
+    # jitters by more than a few pixels when the object is big in the view
+    static_fraction: float = Field(default=0.1, ge=0.0, le=1.0)
     ignore_static_s: float = Field(default=60.0, ge=0.0, le=86400.0)
     occluded_timeout_s: float = Field(default=2.0, gt=0.0, le=600.0)
     lost_timeout_s: float = Field(default=5.0, gt=0.0, le=3600.0)
@@ -36,6 +39,9 @@ class AcquisitionConfig(StrictModel):
     partial_height: float = Field(default=0.8, ge=0.0, le=1.0)
     return_home: bool = True
     home_settle_s: float = Field(default=3.0, ge=0.0, le=600.0)
+    # searching this long without a lock, after the dome followed someone away from home,
+    # goes home too (0 = never)
+    search_timeout_s: float = Field(default=60.0, ge=0.0, le=86400.0)
 
     @model_validator(mode="after")
     def _zone(self) -> Self:

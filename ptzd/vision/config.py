@@ -106,12 +106,14 @@ class OcclusionConfig(StrictModel):
     similarity_threshold: float = Field(default=0.6, ge=0.0, le=1.0)
     # Give up (LOST) after this many consecutive occluded frames.
     max_frames: int = Field(default=30, ge=1, le=10_000)
-    # Beyond the seed, an occluder edge: a moving target whose similarity sits between
-    # similarity_threshold and reacquire_threshold while its box falls behind its own motion
-    # by `stall_lag` box widths (summed over those frames) is behind something that looks
-    # like it, not stopping. It is then occluded: it coasts on at its speed (no decay), and
-    # only a match at reacquire_threshold ends the occlusion. 0 turns this off.
-    stall_lag: float = Field(default=0.5, ge=0.0, le=10.0)
+    # Beyond the seed, an occluder edge: a target whose similarity sits between
+    # similarity_threshold and reacquire_threshold, whose box moved at its learned speed and
+    # then nearly stopped within 4 frames, falling `stall_lag` box widths behind, is taken
+    # to be behind something that looks like it, not stopping. It is then occluded: it
+    # coasts on at its speed (no decay), and only a match at reacquire_threshold ends it.
+    # 0 (default) turns this off: it also fires on walkers who stop (docs/tracking.md);
+    # 0.5 is the value measured.
+    stall_lag: float = Field(default=0.0, ge=0.0, le=10.0)
     # Below this speed (box widths per frame) a target is standing: no stall test.
     stall_min_speed: float = Field(default=0.01, ge=0.0, le=1.0)
     # ... and only while its similarity is below this share of what it usually scores
@@ -186,6 +188,14 @@ class RfConfig(StrictModel):
     negative_reach: float = Field(default=2.0, gt=0.6, le=10.0)
     # False: learn once on the first frame only (the static-RF ablation of seed sec. 5.4).
     online: bool = True
+    # Beyond the seed: while occluded or lost the box coasts on at its velocity (kept this
+    # much per frame) and the particles search around it, their spread growing by
+    # search_growth x sigma_xy per frame up to max_search_sigma x sigma_xy. False: the
+    # seed's "previous particles and box" (the search never leaves where the target was).
+    coast: bool = True
+    coast_decay: float = Field(default=0.95, ge=0.0, le=1.0)
+    search_growth: float = Field(default=0.5, ge=0.0, le=10.0)
+    max_search_sigma: float = Field(default=8.0, ge=1.0, le=100.0)
 
     @model_validator(mode="after")
     def _memory_fits(self) -> RfConfig:

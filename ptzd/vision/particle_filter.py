@@ -93,6 +93,11 @@ def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
 
 
 _RECENT_FRAMES = 50
+# the stall test: frames in which the box must have stopped, after moving at its learned
+# speed (at least _STALL_BEFORE of it) over as many frames before; stopped = under _STALL_NOW
+_STALL_WINDOW = 4
+_STALL_BEFORE = 0.6
+_STALL_NOW = 0.25
 
 
 class ParticleTracker:
@@ -117,7 +122,8 @@ class ParticleTracker:
         self._occluded_frames = 0
         self._lost_frames = 0
         self._reacquire_hits = 0  # consecutive LOST frames whose best candidate matched
-        self._lag = 0.0  # px the box fell behind its own motion over the current grey frames
+        # observed centre steps of the last tracked frames (for the stall test)
+        self._steps: deque[FloatArray] = deque(maxlen=2 * _STALL_WINDOW)
         # similarities of the last tracked frames: what this target usually scores
         self._recent: deque[float] = deque(maxlen=_RECENT_FRAMES)
         self._stalled = False  # occluded by a look-alike edge (see OcclusionConfig.stall_lag)
@@ -155,7 +161,8 @@ class ParticleTracker:
         self._likelihood.init(frame, centre)
         self._state = TrackState.TRACKING
         self._occluded_frames = 0
-        self._lag, self._stalled = 0.0, False
+        self._stalled = False
+        self._steps.clear()
         self._recent.clear()
         self._lost_frames = 0
         self._reacquire_hits = 0
@@ -190,13 +197,14 @@ class ParticleTracker:
         sim = self._likelihood.similarity(frame, candidate)
         self._confidence = sim
         was_tracking = self._state is TrackState.TRACKING
-        if was_tracking and self._stalls(candidate, sim):
+        lag = self._stall_lag(candidate, sim) if was_tracking else None
+        if lag is not None:
             self._stalled = True
             sim = 0.0  # occluded from this frame on
             # the coast starts where the target would be had it kept its speed (the coast
             # step below adds this frame's motion), and the cloud leaves the edge with it
             direction = self._velocity / np.hypot(*self._velocity)
-            ahead = candidate[:2] - self._lag * direction - self._velocity
+            ahead = candidate[:2] + lag * direction - self._velocity
             self._particles[:, [X, Y]] += ahead - self._box[:2]
             self._particles[:, [VX, VY]] = self._velocity
             self._box[:2] = ahead
@@ -207,6 +215,9 @@ class ParticleTracker:
             self._stalled = False
         if self._state is TrackState.TRACKING:
             self._recent.append(self._confidence)
+            self._steps.append(candidate[:2] - self._box[:2])
+        else:
+            self._steps.clear()
         self.resampled = False
         if self._state is TrackState.TRACKING:
             if was_lost:
@@ -393,26 +404,40 @@ class ParticleTracker:
             TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
         )
 
-    def _stalls(self, candidate: FloatArray, similarity: float) -> bool:
-        """Whether a moving target's box is stuck on an occluder edge that resembles it."""
+    def _stall_lag(self, candidate: FloatArray, similarity: float) -> float | None:
+        """If a moving target's box is stuck on an occluder edge that resembles it: how far
+        (px, along its motion) the box fell behind over the last `_STALL_WINDOW` frames.
+
+        Stuck means: the similarity is in the grey zone and below `stall_drop` of what this
+        target usually scores; over the `_STALL_WINDOW` frames before, the box moved at
+        about its learned speed (so that speed is not stale: a walker slowing down over
+        many grey frames is not stuck); over the last ones it nearly stopped, falling
+        `stall_lag` box widths behind. Else None."""
         occ = self._config.occlusion
         speed = float(np.hypot(*self._velocity))
-        width = float(self._box[2])
         if (
             occ.stall_lag <= 0
             or similarity >= occ.reacquire_threshold
             or similarity < occ.similarity_threshold
-            or speed < occ.stall_min_speed * width
+            or speed < occ.stall_min_speed * float(self._box[2])
+            or len(self._steps) < 2 * _STALL_WINDOW - 1
             or len(self._recent) < _RECENT_FRAMES // 2
             # a target that always scores this low is not behind anything new
             or similarity > occ.stall_drop * float(np.percentile(self._recent, 75))
         ):
-            self._lag = 0.0
-            return False
-        # the step beyond the predicted one, along the direction of motion (< 0: behind)
-        ahead = float(np.dot(candidate[:2] - (self._box[:2] + self._velocity), self._velocity))
-        self._lag = min(0.0, self._lag + ahead / speed)
-        return self._lag <= -occ.stall_lag * width
+            return None
+        direction = self._velocity / speed
+        steps = [*self._steps, candidate[:2] - self._box[:2]][-2 * _STALL_WINDOW :]
+        along = np.array([float(step @ direction) for step in steps])
+        before, now = along[:_STALL_WINDOW], along[_STALL_WINDOW:]
+        lag = _STALL_WINDOW * speed - float(now.sum())
+        if (
+            before.mean() < _STALL_BEFORE * speed
+            or now.mean() > _STALL_NOW * speed
+            or lag < occ.stall_lag * float(self._box[2])
+        ):
+            return None
+        return lag
 
     def _resample(self) -> None:
         n = self._config.num_particles

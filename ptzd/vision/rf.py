@@ -46,6 +46,7 @@ from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix, wei
 from ptzd.vision.tracking import Box, TrackResult, TrackState
 
 _MIN_SIZE = 4.0  # pixels: boxes never shrink below this
+_VELOCITY_SMOOTHING = 0.3  # share of a learning frame's step taken into the velocity
 
 
 class Branch(StrEnum):
@@ -268,11 +269,15 @@ class RfTracker:
         diff = float(np.linalg.norm(estimate[:2] - self._box[:2]))
         p_t = float(self.likelihood.probability(self.likelihood.features(maps, estimate[None]))[0])
         u_min, u_max = learning_bounds(maps.variance(estimate), self._rf_config)
-        branch = choose_branch(diff, self._box[2] / 2, p_t, u_min, u_max)
+        # the abnormal-jump limit; while coasting, the target may turn up anywhere searched
+        jump = self._box[2] / 2
+        if self._rf_config.coast and self.occluded_frames:
+            jump = max(jump, 2.0 * self._search_sigma())
+        branch = choose_branch(diff, jump, p_t, u_min, u_max)
         self.branch = branch
         self._confidence = p_t
         if branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION:
-            self._move_to(estimate)
+            self._move_to(estimate, learn_velocity=branch is Branch.LEARN)
             # sec. 4.3: the memory grows with every tracked frame until it is full
             growing = len(self.memory.positives) < self._rf_config.positives
             if self._rf_config.online and (branch is Branch.LEARN or growing):
@@ -284,12 +289,15 @@ class RfTracker:
                 self._state = TrackState.TRACKING
         else:
             # 2.4 / 3: previous forests, particles and box
-            self._particles = previous
-            self._velocity = np.zeros(2)
-            self._centres.append(self._box[:2].copy())
             # abnormal frames count too (beyond the seed): otherwise a target that really
             # moved fast would keep the tracker in the abnormal branch for good
             self.occluded_frames += 1
+            if self._rf_config.coast:
+                self._coast()
+            else:
+                self._particles = previous
+                self._velocity = np.zeros(2)
+                self._centres.append(self._box[:2].copy())
             if self.occluded_frames >= self._rf_config.max_occluded:
                 self._state = TrackState.LOST
             elif self._state is TrackState.TRACKING:
@@ -325,10 +333,21 @@ class RfTracker:
             self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
 
     def _predict(self, shape: tuple[int, ...]) -> None:
-        """Seed eqs. 12-14: centres drift by the floored mean of the last two velocities."""
+        """Seed eqs. 12-14: centres drift by the floored mean of the last two velocities.
+
+        While coasting (occluded or lost, `RfConfig.coast`) the particles are drawn around
+        the coasting box instead, with a spread that grows with the frames not tracked."""
         rf = self._rf_config
         n = self._particles.shape[0]
         noise = self._rng.standard_normal((n, 4))
+        p = self._particles
+        if rf.coast and self.occluded_frames:
+            p[:, :2] = self._box[:2] + noise[:, :2] * self._search_sigma()
+            p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
+            p[:, 0] = np.clip(p[:, 0], 0, shape[1] - 1)
+            p[:, 1] = np.clip(p[:, 1], 0, shape[0] - 1)
+            np.maximum(p[:, 2:], _MIN_SIZE, out=p[:, 2:])
+            return
         c = list(self._centres)
         if len(c) >= 3:
             drift = np.floor(((c[-1] - c[-2]) + (c[-2] - c[-3])) / 2)
@@ -336,7 +355,6 @@ class RfTracker:
             drift = c[-1] - c[-2]
         else:
             drift = np.zeros(2)
-        p = self._particles
         p[:, :2] += drift + noise[:, :2] * rf.sigma_xy
         p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
         p[:, 0] = np.clip(p[:, 0], 0, shape[1] - 1)
@@ -360,8 +378,24 @@ class RfTracker:
         idx = weighted_resample(weights, self._resampling, self._rng)
         self._particles = self._particles[idx]
 
-    def _move_to(self, estimate: FloatArray) -> None:
-        self._velocity = estimate[:2] - self._box[:2]
+    def _search_sigma(self) -> float:
+        """Spread (px) of the particles around the box: sigma_xy, growing while coasting."""
+        rf = self._rf_config
+        if not (rf.coast and self.occluded_frames):
+            return rf.sigma_xy
+        return rf.sigma_xy * min(1.0 + rf.search_growth * self.occluded_frames, rf.max_search_sigma)
+
+    def _coast(self) -> None:
+        """Not tracked this frame: the box walks on at its (decaying) velocity; the velocity
+        history follows it, so the drift resumes from there once the target is found."""
+        self._velocity = self._velocity * self._rf_config.coast_decay
+        self._box[:2] = self._box[:2] + self._velocity
+        self._centres.append(self._box[:2].copy())
+
+    def _move_to(self, estimate: FloatArray, *, learn_velocity: bool) -> None:
+        if learn_velocity:  # from learning-grade frames only: an occluded target lags
+            step = estimate[:2] - self._box[:2]
+            self._velocity = (1 - _VELOCITY_SMOOTHING) * self._velocity + _VELOCITY_SMOOTHING * step
         self._box = estimate.copy()
         self._centres.append(self._box[:2].copy())
 
