@@ -14,7 +14,7 @@ from ptzd.vision.particle_filter import (
     ego_motion_matrix,
     weighted_resample,
 )
-from ptzd.vision.tracking import TrackState, make_tracker
+from ptzd.vision.tracking import TrackResult, TrackState, make_tracker
 from tests.vision_helpers import Scene, iou
 
 
@@ -264,7 +264,7 @@ class _EdgeLikelihood:
         pass
 
 
-def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list]:
+def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list[TrackResult]]:
     lik = _EdgeLikelihood()
     tracker = ParticleTracker(config, lik)
     frame = np.zeros((240, 400, 3), np.uint8)
