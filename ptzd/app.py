@@ -596,7 +596,7 @@ class Daemon:
             commands.append(decision.preset)
         elif self._home_requested and self.controller is not None:
             self._home_requested = False
-            home = self.controller.go_home()  # acquisition gave up on the target
+            home = self.controller.go_home(now)  # acquisition gave up on the target
             if home is not None:
                 commands.append(home)
         motion = decision.motion

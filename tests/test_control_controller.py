@@ -175,3 +175,21 @@ def test_feedforward_waits_for_a_confident_track() -> None:
     assert _controller().update(unsure, now=0.0, hfov=30.0).motion == STOP
     lenient = _controller(feedforward_min_confidence=0.6)
     assert lenient.update(unsure, now=0.0, hfov=30.0).motion.pan > 0
+
+
+def test_without_a_home_preset_going_home_zooms_fully_out_once() -> None:
+    ctl = _controller(lost=LostConfig(hold_s=60.0, widen_s=5.0))
+    assert ctl.go_home(10.0) is None  # no preset to send...
+    widen = ctl.update(None, now=11.0, hfov=6.4)
+    assert widen.mode == "widen" and widen.motion == Motion(zoom=Zoom.OUT)  # ...zoom out
+    assert ctl.update(None, now=14.9, hfov=40.0).mode == "widen"
+    assert ctl.update(None, now=15.1, hfov=60.0).motion == STOP  # for widen_s, then stop
+    assert ctl.go_home(20.0) is None and ctl.update(None, now=21.0, hfov=60.0).motion == STOP
+    # a lost selected target: stop, hold, then widen (once)
+    lost = _controller(lost=LostConfig(hold_s=2.0, widen_s=5.0))
+    modes = [lost.update(_track(TARGET, t, state=TrackState.LOST), now=t, hfov=10.0).mode
+             for t in (0.0, 1.0, 2.5, 6.0, 8.0)]  # fmt: skip
+    assert modes == ["lost", "lost", "widen", "widen", "lost"]
+    # widen_s = 0: stay as is
+    stay = _controller(lost=LostConfig(widen_s=0.0))
+    assert stay.go_home(0.0) is None and stay.update(None, now=1.0, hfov=6.4).motion == STOP

@@ -97,6 +97,9 @@ class LostConfig(StrictModel):
     follow_occluded: bool = True
     hold_s: float = Field(default=5.0, ge=0.0, le=3600.0)
     home_preset: int = Field(default=0, ge=0, le=255)
+    # without a home preset, "going home" zooms fully out for this long (so the detector can
+    # find someone again rather than stare at whatever the dome was zoomed in on); 0 = stay
+    widen_s: float = Field(default=5.0, ge=0.0, le=120.0)
 
 
 class DomeModelConfig(StrictModel):

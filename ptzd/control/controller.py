@@ -36,6 +36,8 @@ from ptzd.vision.tracking import TrackState
 
 __all__ = ["STOP", "ControlDecision", "PtzController", "TrackInput"]
 
+_WIDEN = Motion(zoom=Zoom.OUT)  # going "home" without a home preset
+
 
 @dataclass(frozen=True)
 class TrackInput:
@@ -56,7 +58,7 @@ class ControlDecision:
     """The command to be in force now, plus what led to it."""
 
     motion: Motion
-    mode: str  # idle | stale | track | coast | hold | lost | home
+    mode: str  # idle | stale | track | coast | hold | lost | home | widen
     preset: Preset | None = None
     zoom_step: ZoomStep | None = None
     region: Region | None = None
@@ -89,6 +91,7 @@ class PtzController:
         self._zoom_direction = Zoom.NONE
         self._lost_since: float | None = None
         self._went_home = False
+        self._widen_until = -math.inf  # zooming fully out instead of a home preset
 
     @property
     def zoom_layer(self) -> int:
@@ -100,6 +103,7 @@ class PtzController:
         self._rest()
         self._lost_since = None
         self._went_home = False
+        self._widen_until = -math.inf
 
     def _rest(self) -> None:
         self.pan_pid.reset()
@@ -119,9 +123,10 @@ class PtzController:
         dt = 0.0 if self._last_time is None else max(0.0, now - self._last_time)
         self._last_time = now
         cfg = self.config
+        widening = now < self._widen_until
         if track is None:
             self._rest()
-            return ControlDecision(STOP, "idle")
+            return ControlDecision(_WIDEN if widening else STOP, "widen" if widening else "idle")
         if now - track.capture_time > cfg.max_track_age_s:
             self._rest()
             return ControlDecision(STOP, "stale", track_time=track.capture_time)
@@ -137,10 +142,19 @@ class PtzController:
             return self._track(track, now, dt, hfov, zoom=False, mode="coast")
         return self._track(track, now, dt, hfov)
 
-    def go_home(self) -> Preset | None:
-        """The home preset to go to now, once per loss (None without one or if already sent)."""
+    def go_home(self, now: float | None = None) -> Preset | None:
+        """The home preset to go to now, once per loss (None without one or if already sent).
+
+        Without a home preset (and with `lost.widen_s`), going home at `now` means zooming
+        fully out: the next `widen_s` seconds of updates without a track command zoom OUT."""
         home = self.config.lost.home_preset
-        if not home or self._went_home:
+        if self._went_home:
+            return None
+        if not home:
+            if now is not None and self.config.lost.widen_s > 0:
+                self._went_home = True
+                self._widen_until = now + self.config.lost.widen_s
+                self.zoom.layer = 0
             return None
         self._went_home = True
         self.zoom.layer = 0
@@ -150,8 +164,10 @@ class PtzController:
         self._rest()
         if self._lost_since is None:
             self._lost_since = now
-        if now - self._lost_since >= self.config.lost.hold_s and (preset := self.go_home()):
+        if now - self._lost_since >= self.config.lost.hold_s and (preset := self.go_home(now)):
             return ControlDecision(STOP, "home", preset=preset, track_time=track_time)
+        if now < self._widen_until:
+            return ControlDecision(_WIDEN, "widen", track_time=track_time)
         return ControlDecision(STOP, "lost", track_time=track_time)
 
     def _track(
