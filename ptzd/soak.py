@@ -14,7 +14,8 @@ come from /proc. Everything is written to `DIR/report.json` plus `DIR/soak.png`.
 
 `--virtual-clock` runs the in-process closed loop (`ptzd sim --virtual-clock`) for N
 simulated minutes as fast as it goes, with the same probe and /proc sampling (no faults:
-there is no separate process to break).
+there is no separate process to break) and the same leak checks (`virtual_report`);
+`--fps` streams the simulated dome at a lower rate (`[sim] fps`) for day-long runs.
 
 Faults, each with its expected recovery (checked, see docs/reliability.md):
 - `serial-reset`: every proxied serial connection is reset (TCP RST) and the port refuses
