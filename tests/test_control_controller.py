@@ -76,15 +76,15 @@ def test_go_home_on_request_once_per_loss_and_never_without_a_preset() -> None:
     ctl = _controller(lost=LostConfig(hold_s=60.0, home_preset=4))
     ctl.update(_track(TARGET, 0.0, state=TrackState.LOST), now=0.0, hfov=60.0)
     # acquisition gave up before the hold ran out: home now, once
-    assert ctl.go_home() == Preset(PresetAction.GOTO, 4)
+    assert ctl.go_home(0.0) == Preset(PresetAction.GOTO, 4)
     assert ctl.zoom_layer == 0
-    assert ctl.go_home() is None
+    assert ctl.go_home(0.0) is None
     later = ctl.update(_track(TARGET, 61.0, state=TrackState.LOST), now=61.0, hfov=60.0)
     assert later.preset is None  # the lost policy does not send it a second time
     # a new target re-arms it
     ctl.acquire(TARGET)
-    assert ctl.go_home() == Preset(PresetAction.GOTO, 4)
-    assert _controller().go_home() is None  # home_preset 0: there is no home
+    assert ctl.go_home(0.0) == Preset(PresetAction.GOTO, 4)
+    assert _controller().go_home(0.0) is None  # home_preset 0: there is no home
 
 
 def test_occluded_follows_the_coasting_box_without_zooming_or_holds() -> None:

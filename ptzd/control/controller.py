@@ -142,7 +142,7 @@ class PtzController:
             return self._track(track, now, dt, hfov, zoom=False, mode="coast")
         return self._track(track, now, dt, hfov)
 
-    def go_home(self, now: float | None = None) -> Preset | None:
+    def go_home(self, now: float) -> Preset | None:
         """The home preset to go to now, once per loss (None without one or if already sent).
 
         Without a home preset (and with `lost.widen_s`), going home at `now` means zooming
@@ -151,7 +151,7 @@ class PtzController:
         if self._went_home:
             return None
         if not home:
-            if now is not None and self.config.lost.widen_s > 0:
+            if self.config.lost.widen_s > 0:
                 self._went_home = True
                 self._widen_until = now + self.config.lost.widen_s
                 self.zoom.layer = 0
@@ -191,23 +191,16 @@ class PtzController:
         region = self.regions.update(ex, ey)
         to_reference = cfg.reference_width / width
         scale = self.gain_scale(hfov)
-        pan = self._axis_speed(
-            region.column,
-            (cx - width / 2) * to_reference,
-            dt,
-            scale,
-            tilt=False,
-            feedforward=self._feedforward(vx, hfov, track),
-        )
+
+        def axis(zone: int, offset_px: float, v_px_s: float, *, tilt: bool) -> int:
+            feedforward = self._feedforward(v_px_s, hfov, track)
+            return self._axis_speed(
+                zone, offset_px * to_reference, dt, scale, tilt=tilt, feedforward=feedforward
+            )
+
+        pan = axis(region.column, cx - width / 2, vx, tilt=False)
         # image y grows downwards, tilt + is up: a target below the centre needs tilt < 0
-        tilt = -self._axis_speed(
-            region.row,
-            (cy - height / 2) * to_reference,
-            dt,
-            scale,
-            tilt=True,
-            feedforward=self._feedforward(vy, hfov, track),
-        )
+        tilt = -axis(region.row, cy - height / 2, vy, tilt=True)
 
         step: ZoomStep | None = None
         if not zoom:

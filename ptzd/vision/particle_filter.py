@@ -22,7 +22,7 @@ from ptzd.vision.tracking import Box, TrackResult, TrackState
 # Column indices of the particle state.
 X, VX, Y, VY, W, H = range(6)
 # How much of each frame's centre displacement enters the reported velocity.
-_VELOCITY_SMOOTHING = 0.3
+VELOCITY_SMOOTHING = 0.3  # share of a clean frame's step taken into the learned velocity
 # At most this many boxes in a frame-wide re-acquisition scan.
 _SCAN_MAX = 600
 
@@ -90,6 +90,16 @@ def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
     if m.shape == (3, 3) and np.all(np.isfinite(m)) and abs(np.linalg.det(m)) > 1e-12:
         return m
     raise ValueError(f"ego_motion must be a shift (2,) or an invertible 3x3, got {m.shape}")
+
+
+def ar2_drift(centres: deque[FloatArray]) -> FloatArray:
+    """Ko 2013 eq. 13: the mean of the last two track velocities, floored to pixels."""
+    c = list(centres)
+    if len(c) >= 3:
+        return np.floor(((c[-1] - c[-2]) + (c[-2] - c[-3])) / 2)
+    if len(c) == 2:
+        return c[-1] - c[-2]
+    return np.zeros(2)
 
 
 _RECENT_FRAMES = 50
@@ -273,14 +283,7 @@ class ParticleTracker:
         if self._state is not TrackState.TRACKING and not self._stalled:
             p[:, [VX, VY]] *= self._config.motion.occluded_velocity_decay
         if self._config.motion.model == "ar2":
-            # Ko 2013 eq. 13: mean of the last two track velocities, floored to pixels
-            c = list(self._centres)
-            if len(c) >= 3:
-                drift = np.floor(((c[-1] - c[-2]) + (c[-2] - c[-3])) / 2)
-            elif len(c) == 2:
-                drift = c[-1] - c[-2]
-            else:
-                drift = np.zeros(2)
+            drift = ar2_drift(self._centres)
             if self._state is not TrackState.TRACKING:
                 drift = self._velocity
             p[:, X] += drift[0] + noise[:, X]
@@ -468,7 +471,7 @@ class ParticleTracker:
             # appears to slow down, and coasting on that would leave it behind; and not from
             # the jump back out of a coast
             step = box[:2] - self._box[:2]
-            a = _VELOCITY_SMOOTHING
+            a = VELOCITY_SMOOTHING
             self._velocity = (1 - a) * self._velocity + a * step
         self._box = box
         self._likelihood.adapt(frame, self._box)

@@ -42,11 +42,16 @@ from ptzd.vision.features import (
 )
 from ptzd.vision.forest import ForestBank
 from ptzd.vision.likelihood import FloatArray, Frame
-from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix, weighted_resample
+from ptzd.vision.particle_filter import (
+    VELOCITY_SMOOTHING,
+    apply_homography,
+    ar2_drift,
+    ego_motion_matrix,
+    weighted_resample,
+)
 from ptzd.vision.tracking import Box, TrackResult, TrackState
 
 _MIN_SIZE = 4.0  # pixels: boxes never shrink below this
-_VELOCITY_SMOOTHING = 0.3  # share of a learning frame's step taken into the velocity
 
 
 class Branch(StrEnum):
@@ -271,7 +276,7 @@ class RfTracker:
         u_min, u_max = learning_bounds(maps.variance(estimate), self._rf_config)
         # the abnormal-jump limit; while coasting, the target may turn up anywhere searched
         jump = self._box[2] / 2
-        if self._rf_config.coast and self.occluded_frames:
+        if self._coasting:
             jump = max(jump, 2.0 * self._search_sigma())
         branch = choose_branch(diff, jump, p_t, u_min, u_max)
         self.branch = branch
@@ -341,21 +346,10 @@ class RfTracker:
         n = self._particles.shape[0]
         noise = self._rng.standard_normal((n, 4))
         p = self._particles
-        if rf.coast and self.occluded_frames:
+        if self._coasting:
             p[:, :2] = self._box[:2] + noise[:, :2] * self._search_sigma()
-            p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
-            p[:, 0] = np.clip(p[:, 0], 0, shape[1] - 1)
-            p[:, 1] = np.clip(p[:, 1], 0, shape[0] - 1)
-            np.maximum(p[:, 2:], _MIN_SIZE, out=p[:, 2:])
-            return
-        c = list(self._centres)
-        if len(c) >= 3:
-            drift = np.floor(((c[-1] - c[-2]) + (c[-2] - c[-3])) / 2)
-        elif len(c) == 2:
-            drift = c[-1] - c[-2]
         else:
-            drift = np.zeros(2)
-        p[:, :2] += drift + noise[:, :2] * rf.sigma_xy
+            p[:, :2] += ar2_drift(self._centres) + noise[:, :2] * rf.sigma_xy
         p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
         p[:, 0] = np.clip(p[:, 0], 0, shape[1] - 1)
         p[:, 1] = np.clip(p[:, 1], 0, shape[0] - 1)
@@ -378,10 +372,15 @@ class RfTracker:
         idx = weighted_resample(weights, self._resampling, self._rng)
         self._particles = self._particles[idx]
 
+    @property
+    def _coasting(self) -> bool:
+        """Occluded or lost, with `RfConfig.coast`: the box walks on, the search grows."""
+        return self._rf_config.coast and self.occluded_frames > 0
+
     def _search_sigma(self) -> float:
         """Spread (px) of the particles around the box: sigma_xy, growing while coasting."""
         rf = self._rf_config
-        if not (rf.coast and self.occluded_frames):
+        if not self._coasting:
             return rf.sigma_xy
         return rf.sigma_xy * min(1.0 + rf.search_growth * self.occluded_frames, rf.max_search_sigma)
 
@@ -395,7 +394,8 @@ class RfTracker:
     def _move_to(self, estimate: FloatArray, *, learn_velocity: bool) -> None:
         if learn_velocity:  # from learning-grade frames only: an occluded target lags
             step = estimate[:2] - self._box[:2]
-            self._velocity = (1 - _VELOCITY_SMOOTHING) * self._velocity + _VELOCITY_SMOOTHING * step
+            a = VELOCITY_SMOOTHING
+            self._velocity = (1 - a) * self._velocity + a * step
         self._box = estimate.copy()
         self._centres.append(self._box[:2].copy())
 
