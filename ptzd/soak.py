@@ -103,7 +103,11 @@ def _probe_loop(loop: asyncio.AbstractEventLoop, path: Path, interval: float) ->
                 done: threading.Event = done,
             ) -> None:
                 sample["lag_s"] = time.monotonic() - asked
-                sample["tasks"] = len(asyncio.all_tasks(loop))
+                tasks = len(asyncio.all_tasks(loop))
+                # zero tasks: the callback ran as `asyncio.run` wound down, between the main
+                # task's end and the loop's close; that is no count of the daemon's tasks
+                if tasks:
+                    sample["tasks"] = tasks
                 done.set()
 
             try:
@@ -803,7 +807,8 @@ async def run_virtual(options: SoakOptions) -> dict[str, Any]:
     samples: list[dict[str, Any]] = []
     with (out / "sim.log").open("wb") as log:
         child = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "ptzd.soak", "probe", str(probe), "1.0", "--log-format",
+            sys.executable, "-m", "ptzd.soak", "probe", str(probe),
+            str(min(1.0, options.sample_s)), "--log-format",
             "json", "sim", "--virtual-clock", "--acquire", "--loop",
             "--duration", str(options.minutes * 60), *config,
             "--record", str(out / "sim"), stdout=log, stderr=log,
