@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import inspect
 import math
 import time
@@ -414,7 +415,9 @@ class Daemon:
                 decision = None
                 acquired: BoxTuple | None = None
                 if auto and self.acquirer is not None:
-                    decision = await self._blocking(self._acquire_step, frame, pose, before, result)
+                    decision = await self._blocking(
+                        self._acquire_step, frame, pose, before, result, tracker
+                    )
                     if decision.lock_box is not None:  # a new target, or the old one re-found
                         box = decision.lock_box
                         tracker = self.tracker_factory()
@@ -441,7 +444,12 @@ class Daemon:
             self.tracks.close()
 
     def _acquire_step(
-        self, frame: FrameItem, pose: Pose, before: Pose, result: TrackResult | None
+        self,
+        frame: FrameItem,
+        pose: Pose,
+        before: Pose,
+        result: TrackResult | None,
+        tracker: Tracker | None,
     ) -> Decision:
         """Detection (when it can run) and the acquisition state machine for one frame.
 
@@ -458,8 +466,15 @@ class Daemon:
         if result is not None:  # a tracker that gave up (LOST) reports no box
             box = None if result.state is TrackState.LOST else result.box
             track = AcqTrack(box, occluded=result.state is TrackState.OCCLUDED)
+        resembles = None
+        if tracker is not None:
+            resembles = functools.partial(tracker.resembles, frame.image)
         return self.acquirer.update(
-            frame.capture_time, detections if ran else None, track, camera_moving=moving
+            frame.capture_time,
+            detections if ran else None,
+            track,
+            camera_moving=moving,
+            resembles=resembles,
         )
 
     @staticmethod

@@ -139,6 +139,34 @@ def test_reidentified_after_occlusion_by_a_detection_near_the_last_box() -> None
     assert run.events[-1].reason == "reidentified"
 
 
+def test_a_detection_that_does_not_look_like_the_target_does_not_reidentify_it() -> None:
+    run = Run()
+    run.lock(det(100, 100))
+    run.step(None, TrackResult((110, 100, 30, 80)))
+    assert run.step([], TrackResult(None)).state is AcqState.OCCLUDED
+    asked: list[tuple[float, float, float, float]] = []
+
+    def looks_like_target(box: tuple[float, float, float, float]) -> bool:
+        asked.append(box)
+        return box[0] > 130  # the one further right is the target
+
+    # the nearest detection is someone else: the next nearest, the target, is taken
+    run.now = round(run.now + DT, 6)
+    decision = run.acq.update(
+        run.now, [det(112, 101), det(140, 102)], TrackResult(None), resembles=looks_like_target
+    )
+    assert asked == [(112.0, 101.0, 30.0, 80.0), (140.0, 102.0, 30.0, 80.0)]
+    assert decision.state is AcqState.TRACKING and run.events[-1].reason == "reidentified"
+    assert decision.lock_box == (140.0, 102.0, 30.0, 80.0)
+    # nobody who looks like it: it stays occluded
+    run.step(None, TrackResult((140, 102, 30, 80)))
+    assert run.step([], TrackResult(None)).state is AcqState.OCCLUDED
+    run.now = round(run.now + DT, 6)
+    nobody = run.acq.update(run.now, [det(120, 101)], TrackResult(None), resembles=lambda b: False)
+    decision = nobody
+    assert decision.state is AcqState.OCCLUDED and decision.lock_box is None
+
+
 def test_static_target_is_dropped_and_ignored() -> None:
     run = Run(static_s=3.0, ignore_static_s=20.0, revalidate_s=1.0)
     car = det(200, 200, 40, 90)

@@ -117,23 +117,35 @@ async def test_cancellation_sends_stop() -> None:
     assert motions and motions[-1] == Motion()
 
 
-class ExplodingTracker:
-    """A real tracker that raises on its 5th update (a crash in the vision worker)."""
+class WrappedTracker:
+    """A real tracker, passed through: subclasses change `update`."""
 
     def __init__(self, inner: Tracker) -> None:
-        self.inner, self.updates = inner, 0
+        self.inner = inner
 
     def init(self, frame: np.ndarray, box: tuple[float, float, float, float]) -> None:
         self.inner.init(frame, box)
+
+    def update(self, frame: np.ndarray, ego_motion: np.ndarray | None = None) -> TrackResult:
+        return self.inner.update(frame, ego_motion)
+
+    def rescale(self, factor: float, center: tuple[float, float]) -> None:
+        self.inner.rescale(factor, center)
+
+    def resembles(self, frame: np.ndarray, box: tuple[float, float, float, float]) -> bool:
+        return self.inner.resembles(frame, box)
+
+
+class ExplodingTracker(WrappedTracker):
+    """Raises on its 5th update (a crash in the vision worker)."""
+
+    updates = 0
 
     def update(self, frame: np.ndarray, ego_motion: np.ndarray | None = None) -> TrackResult:
         self.updates += 1
         if self.updates == 5:
             raise RuntimeError("tracker blew up")
         return self.inner.update(frame, ego_motion)
-
-    def rescale(self, factor: float, center: tuple[float, float]) -> None:
-        self.inner.rescale(factor, center)
 
 
 async def test_crash_sends_stop() -> None:
@@ -167,21 +179,12 @@ async def test_stale_tracks_never_move_the_dome() -> None:
     assert motions and all(m == Motion() for m in motions)
 
 
-class SlowTracker:
+class SlowTracker(WrappedTracker):
     """Takes 0.1 s per frame: with 50 fps capture most frames must be dropped."""
-
-    def __init__(self, inner: Tracker) -> None:
-        self.inner = inner
-
-    def init(self, frame: np.ndarray, box: tuple[float, float, float, float]) -> None:
-        self.inner.init(frame, box)
 
     def update(self, frame: np.ndarray, ego_motion: np.ndarray | None = None) -> TrackResult:
         time.sleep(0.1)
         return self.inner.update(frame, ego_motion)
-
-    def rescale(self, factor: float, center: tuple[float, float]) -> None:
-        self.inner.rescale(factor, center)
 
 
 async def test_slow_vision_drops_frames_instead_of_queueing() -> None:

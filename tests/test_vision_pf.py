@@ -277,7 +277,9 @@ def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list[TrackResult]
 
 
 def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on() -> None:
-    lik, results = _edge_run(TrackerConfig(occlusion={"stall_lag": 0.5}))
+    lik, results = _edge_run(
+        TrackerConfig(occlusion={"stall_lag": 0.5}, stillness={"still_frames": 0})
+    )
     hidden = results[lik.HIDE - 1 : lik.SHOW - 1]  # results[i] is frame i + 1
     # within a few frames of vanishing the stalled box is taken for an occlusion...
     first = next(i for i, r in enumerate(hidden) if r.state is TrackState.OCCLUDED)
@@ -293,8 +295,65 @@ def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on(
                for t, r in enumerate(after, start=lik.SHOW + 7))  # fmt: skip
 
 
-def test_without_the_stall_test_the_tracker_stays_on_the_edge() -> None:
-    lik, results = _edge_run(TrackerConfig())  # off by default
+# the edge run's frames never change: the stillness test would call every box still
+_SEED_ONLY = {"occlusion": {"recover_share": 0.0}, "stillness": {"still_frames": 0}}
+
+
+def test_with_the_seeds_single_threshold_the_tracker_stays_on_the_edge() -> None:
+    lik, results = _edge_run(TrackerConfig.model_validate(_SEED_ONLY))
     late = results[lik.SHOW - 6 : lik.SHOW - 1]
     assert all(r.state is TrackState.TRACKING for r in late)  # the seed's ths_sim = 0.6
     assert all(abs(r.box[0] + r.box[2] / 2 - lik.EDGE_X) < 6.0 for r in late)
+
+
+class _LookAlikeLikelihood(_EdgeLikelihood):
+    """A standing target (similarity 0.95) is hidden completely from frame 20 (0.3
+    everywhere); from frame 26 a look-alike in its place scores 0.66: above ths_sim (0.6),
+    below 0.8 x the target's usual 0.95. From frame 70 the target is back."""
+
+    def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        t = int(frame[0, 0, 0])
+        d2 = (boxes[:, 0] - 110.0) ** 2 + (boxes[:, 1] - self.Y) ** 2
+        near = np.exp(-d2 / 100.0)
+        if 20 <= t < 26:
+            return np.full(len(boxes), 0.3)
+        return (0.66 if 26 <= t < 70 else 0.95) * near
+
+
+def _look_alike_states(config: TrackerConfig) -> str:
+    lik = _LookAlikeLikelihood()
+    tracker = ParticleTracker(config, lik)
+    frame = np.zeros((240, 400, 3), np.uint8)
+    tracker.init(frame, (100, lik.Y - 20, 20, 40))
+    states = []
+    for t in range(1, 90):
+        frame[0, 0, 0] = t
+        states.append(tracker.update(frame).state.value[0])
+    return "".join(states)  # states[i] is frame i + 1
+
+
+def test_with_hysteresis_an_occluded_target_comes_back_only_at_what_it_usually_scores() -> None:
+    # (the frames never change: the stillness test is off here, or it would call all still)
+    config = {"occlusion": {"recover_share": 0.8}, "stillness": {"still_frames": 0}}
+    states = _look_alike_states(TrackerConfig.model_validate(config))
+    assert states[:19] == "t" * 19 and states[19:25] == "o" * 6
+    # the look-alike never brings it back: lost at the 30th occluded frame (max_frames) ...
+    assert states[25:48] == "o" * 23 and states[48:69] == "l" * 21
+    # ... and the target itself does, once it shows again (re-acquisition: 2 frames at 0.8)
+    assert states[71:] == "t" * (89 - 71)
+    # the seed's single threshold takes the look-alike for the target at once
+    seed = _look_alike_states(TrackerConfig.model_validate(_SEED_ONLY))
+    assert seed[25:69] == "t" * 44
+
+
+@pytest.mark.parametrize("kind", ["color", "rf", "svm"])
+def test_resembles_tells_the_target_from_the_background(kind: str) -> None:
+    scene = Scene(velocity=(2.0, 0.0))
+    tracker = make_tracker(TrackerConfig(kind=kind))
+    tracker.init(scene.frame(0), scene.truth(0))
+    for t in range(1, 12):
+        tracker.update(scene.frame(t))
+    frame = scene.frame(11)
+    x, y, w, h = scene.truth(11)
+    assert tracker.resembles(frame, (x, y, w, h))
+    assert not tracker.resembles(frame, (x + 120, y + 40, w, h))  # plain background

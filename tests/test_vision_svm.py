@@ -22,7 +22,7 @@ from ptzd.vision.svm import (
     platt_fit,
     platt_probability,
 )
-from tests.vision_helpers import Scene, iou
+from tests.vision_helpers import Scene, draw_person, iou
 
 REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
 
@@ -114,6 +114,25 @@ def test_switches_from_lk_to_pf_and_back() -> None:
         tracker.update(scene.frame(t))
         modes.append(tracker.mode)
     assert Mode.LK in modes  # a confident PF estimate hands back to LK
+
+
+def test_lk_is_trusted_only_while_the_svm_agrees() -> None:
+    # h1 so lax that the SSD error never hands over: only the SVM's verdict can
+    scene = Scene()
+    # someone else in the target's place: other colours, the same grey levels (LK fits)
+    other = Scene(vanish_after=1).frame(2)
+    draw_person(other, scene.truth(2), (40, 130, 30), (20, 80, 40))
+    modes = {}
+    for floor in (0.8, 0.0):
+        config = TrackerConfig(kind="svm", svm={"lk_error": 10.0, "lk_min_confidence": floor})
+        tracker = SvmTracker(config)
+        tracker.init(scene.frame(0), scene.truth(0))
+        tracker.update(scene.frame(1))
+        assert tracker.mode is Mode.LK
+        tracker.update(other)
+        assert tracker.lk_error < 0.05
+        modes[floor] = tracker.mode
+    assert modes == {0.8: Mode.PF, 0.0: Mode.LK}
 
 
 def test_retrains_after_15_new_positives_and_tracks() -> None:

@@ -73,7 +73,8 @@ class ZoomConfig(StrictModel):
     fast_speed: float = Field(default=0.6, gt=0.0, le=10.0)
     confirm_s: float = Field(default=0.4, ge=0.0, le=30.0)
     min_dwell_s: float = Field(default=1.5, ge=0.0, le=60.0)
-    reversal_guard_s: float = Field(default=10.0, ge=0.0, le=600.0)
+    # one second over the 10 s the target counts in: what the camera renders lags control
+    reversal_guard_s: float = Field(default=11.0, ge=0.0, le=600.0)
     log_rate: float = Field(default=0.75, gt=0.01, le=20.0)
     min_step_s: float = Field(default=0.05, gt=0.0, le=5.0)
     max_step_s: float = Field(default=1.0, gt=0.0, le=10.0)

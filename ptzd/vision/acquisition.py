@@ -264,8 +264,16 @@ class Acquirer:
         x, y, w, _ = box
         return (x + w / 2 - last[2] / 2, y, last[2], last[3])
 
-    def _near_last(self, detections: Sequence[Detection], reach: float) -> Box | None:
-        """The detection best matching the last known target box within `reach` box sizes."""
+    def _near_last(
+        self,
+        detections: Sequence[Detection],
+        reach: float,
+        resembles: Callable[[Box], bool] | None,
+    ) -> Box | None:
+        """The detection nearest the last known target box, within `reach` box sizes and of
+        a like size, taken whole (`_whole`), that the tracker says looks like the target
+        (`resembles`; None: no appearance test). Someone else walking past is not the target
+        however close: without the test the dome changed person at every crossing."""
         last = self._last_box
         if last is None:
             return None
@@ -276,8 +284,12 @@ class Acquirer:
             dx, dy = _centre(det.box)
             dist = math.hypot(dx - lx, dy - ly)
             ratio = (det.w * det.h) / max(1e-6, last[2] * last[3])
-            if dist <= reach * scale and 0.4 <= ratio <= 2.5 and (best is None or dist < best[0]):
-                best = (dist, det.box)
+            nearer = best is None or dist < best[0]
+            if dist > reach * scale or not 0.4 <= ratio <= 2.5 or not nearer:
+                continue
+            whole = self._whole(det.box)
+            if resembles is None or resembles(whole):
+                best = (dist, whole)
         return None if best is None else best[1]
 
     # -- the update -----------------------------------------------------------------------
@@ -306,8 +318,12 @@ class Acquirer:
         track: TrackResult | None = None,
         *,
         camera_moving: bool = False,
+        resembles: Callable[[Box], bool] | None = None,
     ) -> Decision:
-        """Advance the state machine by one frame; see the module docstring."""
+        """Advance the state machine by one frame; see the module docstring.
+
+        `resembles` is the tracker's appearance test (`Tracker.resembles` on this frame): a
+        detection re-identifies the lost target only if it passes."""
         cfg = self._cfg
         out: list[Transition] = []
         lock_box: Box | None = None
@@ -346,10 +362,12 @@ class Acquirer:
                 gave_up = track is None or track.box is None
                 pinned_target = self._target is not None and self._target.pinned
                 reach = 1.0 if state is AcqState.OCCLUDED else 2.0
-                found = self._near_last(detections, reach) if detections and gave_up else None
+                found = None
+                if detections and gave_up:
+                    found = self._near_last(detections, reach, resembles)
                 if found is not None:
                     pinned = self._target is not None and self._target.pinned
-                    lock_box = self._lock(now, self._whole(found), "reidentified", out)
+                    lock_box = self._lock(now, found, "reidentified", out)
                     assert self._target is not None
                     self._target.pinned = pinned  # still the operator's target
                 elif (

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from ptzd.vision.config import ResamplingConfig, TrackerConfig
 from ptzd.vision.likelihood import FloatArray, Frame, Likelihood
+from ptzd.vision.stillness import MotionMap
 from ptzd.vision.tracking import Box, TrackResult, TrackState
 
 # Column indices of the particle state.
@@ -138,6 +139,9 @@ class ParticleTracker:
         self._recent: deque[float] = deque(maxlen=_RECENT_FRAMES)
         self._stalled = False  # occluded by a look-alike edge (see OcclusionConfig.stall_lag)
         self._confidence = 0.0
+        still = config.stillness
+        self._motion = MotionMap(still.diff_threshold) if still.still_frames else None
+        self._still_frames = 0  # consecutive frames in which the box did not move
         self._initialised = False
         self.resampled = False  # whether the last update resampled (for tests and debugging)
 
@@ -177,19 +181,27 @@ class ParticleTracker:
         self._lost_frames = 0
         self._reacquire_hits = 0
         self._confidence = 1.0
+        self._still_frames = 0
+        if self._motion is not None:
+            self._motion.reset(frame)
         self._initialised = True
 
     def update(self, frame: Frame, ego_motion: NDArray[np.float64] | None = None) -> TrackResult:
         if not self._initialised:
             raise RuntimeError("init() the tracker before update()")
-        if ego_motion is not None:
-            self._apply(ego_motion_matrix(ego_motion))
+        homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
+        if homography is not None:
+            self._apply(homography)
+        if self._motion is not None:
+            self._motion.update(frame, homography)
         self._predict()
         if self._state is TrackState.LOST:
             self._search(frame)
         self._constrain(frame)
         boxes = self._particles[:, [X, Y, W, H]]
         log_l = self._likelihood.log_likelihood(frame, boxes)
+        if self._state is TrackState.LOST:
+            log_l = log_l - self._still_penalty(boxes)
         weights = np.exp(log_l - log_l.max())
         self._weights = weights / weights.sum()
         was_lost = self._state is TrackState.LOST
@@ -206,6 +218,8 @@ class ParticleTracker:
             )
         sim = self._likelihood.similarity(frame, candidate)
         self._confidence = sim
+        if self._box_is_still(candidate):
+            sim = 0.0  # on something that does not move: not the person, however alike
         was_tracking = self._state is TrackState.TRACKING
         lag = self._stall_lag(candidate, sim) if was_tracking else None
         if lag is not None:
@@ -249,12 +263,20 @@ class ParticleTracker:
             [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
         )
         self._apply(zoom)
+        if self._motion is not None:
+            self._motion.transform(zoom)
         # seed eqs. 34-38: the box keeps the reference aspect ratio across zoom steps
         aspect = self._reference[0] / self._reference[1]
         area = self._box[2] * self._box[3]
         self._box[2] = np.sqrt(area * aspect)
         self._box[3] = self._box[2] / aspect
         self._likelihood.rescale(factor)
+
+    def resembles(self, frame: Frame, box: Box) -> bool:
+        x, y, w, h = (float(v) for v in box)
+        centre = np.array([x + w / 2, y + h / 2, w, h])
+        share = self._config.occlusion.match_share
+        return self._likelihood.similarity(frame, centre) >= self._share_of_usual(share)
 
     @property
     def state(self) -> TrackState:
@@ -326,7 +348,7 @@ class ParticleTracker:
         lost = self._state is TrackState.LOST
         if lost and occ.scan_every and self._lost_frames % occ.scan_every == 0:
             scan = self._scan_boxes(frame)
-            scores = self._likelihood.log_likelihood(frame, scan)
+            scores = self._likelihood.log_likelihood(frame, scan) - self._still_penalty(scan)
             best = scan[np.argsort(-scores, kind="stable")[: max(1, k // 4)]]
             seeds = best[np.arange(k) % len(best)]
             jitter = self._rng.standard_normal((k, 2)) * (size / 8)
@@ -397,7 +419,7 @@ class ParticleTracker:
             else:
                 self._reacquire_hits = 0
             return
-        if similarity >= occ.similarity_threshold:
+        if similarity >= self._back_threshold():
             self._state = TrackState.TRACKING
             self._occluded_frames = 0
             return
@@ -406,6 +428,41 @@ class ParticleTracker:
         self._state = (
             TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
         )
+
+    def _box_is_still(self, box: FloatArray) -> bool:
+        """Count the frames in which `box` did not move; whether there were `still_frames`."""
+        still = self._config.stillness
+        moved = None if self._motion is None else self._motion.moving_fraction(box)
+        if moved is None:
+            return False
+        if moved[0] < still.min_moving_fraction:
+            self._still_frames += 1
+        else:
+            self._still_frames = 0
+        return self._still_frames >= still.still_frames
+
+    def _still_penalty(self, boxes: FloatArray) -> FloatArray | float:
+        """While lost: what is taken off the log-likelihood of boxes in which nothing moved."""
+        still = self._config.stillness
+        moved = None if self._motion is None else self._motion.moving_fraction(boxes)
+        if moved is None:
+            return 0.0
+        return np.where(moved < still.min_moving_fraction, still.lost_penalty, 0.0)
+
+    def _back_threshold(self) -> float:
+        """The similarity that keeps a tracked target tracked, or brings an occluded one back."""
+        occ = self._config.occlusion
+        if self._state is not TrackState.OCCLUDED:
+            return occ.similarity_threshold
+        return self._share_of_usual(occ.recover_share)
+
+    def _share_of_usual(self, share: float) -> float:
+        """`share` of what this target usually scores, and at least similarity_threshold."""
+        occ = self._config.occlusion
+        if not self._recent or share == 0:
+            return occ.similarity_threshold
+        usual = float(np.percentile(self._recent, 75))
+        return max(occ.similarity_threshold, share * usual)
 
     def _stall_lag(self, candidate: FloatArray, similarity: float) -> float | None:
         """If a moving target's box is stuck on an occluder edge that resembles it: how far

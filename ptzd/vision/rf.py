@@ -309,6 +309,16 @@ class RfTracker:
                 self._state = TrackState.OCCLUDED
         return self._result()
 
+    def resembles(self, frame: Frame, box: Box) -> bool:
+        """The forests call it positive (P > 0.5), as they call the target's own boxes."""
+        x, y, w, h = (float(v) for v in box)
+        centre = np.array([[x + w / 2, y + h / 2, w, h]])
+        # fresh maps: the frame's cached ones cover the particles, not necessarily this box
+        grey, cfg = to_grey(frame), self._rf_config
+        region = region_of(self._cover(centre), grey.shape)
+        maps = FeatureMaps(grey, region, cfg.lid_bins, cfg.ocs_threshold)
+        return float(self.likelihood.probability(self.likelihood.features(maps, centre))[0]) > 0.5
+
     def rescale(self, factor: float, center: tuple[float, float]) -> None:
         if not factor > 0 or not np.isfinite(factor):
             raise ValueError(f"rescale factor must be positive, got {factor}")

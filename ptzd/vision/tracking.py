@@ -57,6 +57,11 @@ class Tracker(Protocol):
         """The image scale changed by `factor` about `center` (a zoom step)."""
         ...
 
+    def resembles(self, frame: NDArray[np.uint8], box: Box) -> bool:
+        """Whether `box` of `frame` (the frame last given to `update`) looks like the target
+        to this tracker's appearance model: the test a re-identification must pass."""
+        ...
+
 
 def make_tracker(config: TrackerConfig) -> Tracker:
     """The tracker `config.kind` names."""

@@ -1,0 +1,91 @@
+"""Motion evidence: what moved between frames with the camera's motion removed, and the
+tracker letting go of a box in which nothing moves."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ptzd.vision.config import TrackerConfig
+from ptzd.vision.stillness import MotionMap
+from ptzd.vision.tracking import TrackState, make_tracker
+from tests.vision_helpers import Scene
+
+
+def centre(box: tuple[float, float, float, float]) -> np.ndarray:
+    x, y, w, h = box
+    return np.array([[x + w / 2, y + h / 2, w, h]])
+
+
+def shift(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
+def test_a_walker_moves_and_the_background_does_not_under_a_panning_camera() -> None:
+    scene = Scene(velocity=(3.0, 0.0), shift=(-4.0, 0.0))  # the camera pans 4 px/frame
+    motion = MotionMap(diff_threshold=20)
+    assert motion.moving_fraction(centre(scene.truth(0))) is None  # nothing before 2 frames
+    motion.reset(scene.frame(0))
+    for t in range(1, 4):
+        motion.update(scene.frame(t), shift(*scene.shift))
+    walker = motion.moving_fraction(centre(scene.truth(3)))
+    background = motion.moving_fraction(np.array([[250.0, 60.0, 40.0, 80.0]]))
+    assert walker is not None and background is not None
+    assert walker[0] > 0.1 and background[0] < 0.005
+    # without the camera's motion taken out, the textured background "moves" too
+    naive = MotionMap(diff_threshold=20)
+    naive.reset(scene.frame(2))
+    naive.update(scene.frame(3), None)
+    fraction = naive.moving_fraction(np.array([[250.0, 60.0, 40.0, 80.0]]))
+    assert fraction is not None and fraction[0] > 0.03 > 6 * background[0]
+
+
+def test_a_zoom_step_is_taken_out_too_and_unseen_borders_do_not_count() -> None:
+    frame = Scene().frame(0)
+    zoom = np.array([[1.2, 0.0, -0.2 * 160], [0.0, 1.2, -0.2 * 120], [0.0, 0.0, 1.0]])
+    zoomed = np.asarray(cv2.warpPerspective(frame, zoom, (320, 240)), np.uint8)
+    motion = MotionMap(diff_threshold=20)
+    motion.reset(frame)
+    motion.transform(zoom)
+    motion.update(zoomed, None)
+    whole = motion.moving_fraction(np.array([[160.0, 120.0, 320.0, 240.0]]))
+    assert whole is not None and whole[0] < 0.01
+    # a pan to the right: the strip the previous frame never saw is unknown, not motion
+    panned = np.asarray(cv2.warpPerspective(frame, shift(-30, 0), (320, 240)), np.uint8)
+    motion.reset(frame)
+    motion.update(panned, shift(-30, 0))
+    strip = motion.moving_fraction(np.array([[305.0, 120.0, 30.0, 240.0]]))
+    assert strip is not None and strip[0] == 0.0
+
+
+def test_boxes_are_scored_at_once_and_clipped_to_the_frame() -> None:
+    still = np.full((100, 100), 50, np.uint8)
+    moved = still.copy()
+    moved[:, 50:] = 200  # the right half changed
+    motion = MotionMap(diff_threshold=20)
+    motion.reset(still)
+    motion.update(moved, None)
+    boxes = np.array([[25.0, 50.0, 50.0, 100.0], [75.0, 50.0, 50.0, 100.0], [95.0, 50, 30, 20]])
+    fractions = motion.moving_fraction(boxes)
+    assert fractions is not None
+    assert fractions.tolist() == [0.0, 1.0, 1.0]  # the last box is clipped at x = 100
+
+
+def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
+    standing = Scene(velocity=(0.0, 0.0))
+    walking = Scene(velocity=(2.0, 0.5))
+    results = {}
+    for name, scene, still_frames in [
+        ("standing", standing, 10),
+        ("walking", walking, 10),
+        ("standing, test off", standing, 0),
+    ]:
+        tracker = make_tracker(TrackerConfig(stillness={"still_frames": still_frames}))
+        tracker.init(scene.frame(0), scene.truth(0))
+        results[name] = [tracker.update(scene.frame(t)).state for t in range(1, 40)]
+    # nothing moved in the standing target's box for 10 frames: occluded, then lost
+    assert results["standing"][:9] == [TrackState.TRACKING] * 9
+    assert TrackState.TRACKING not in results["standing"][10:]
+    assert results["standing"][-1] is TrackState.LOST
+    assert set(results["walking"]) == {TrackState.TRACKING}
+    assert set(results["standing, test off"]) == {TrackState.TRACKING}
