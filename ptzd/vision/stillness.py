@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
 
 from ptzd.vision.features import to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
@@ -22,19 +21,47 @@ _IDENTITY = np.eye(3)
 
 
 class MotionMap:
-    """The moving pixels of the last frame given to `update` (none before the second)."""
+    """The moving pixels of the last frame given to `update` (none before the second).
+
+    Every image is written into buffers allocated once per frame size: the daemon runs this
+    on every frame for months, and a fresh megabyte or two per frame only churns the heap."""
 
     def __init__(self, diff_threshold: int) -> None:
         self._threshold = diff_threshold
-        self._previous: NDArray[np.uint8] | None = None
-        self._pending: FloatArray = _IDENTITY.copy()  # image motion since `_previous`
-        self._integral: NDArray[np.int32] | None = None
+        self._shape: tuple[int, int] | None = None
+        self._have_previous = False
+        self._known = False  # whether `_integral` holds this frame's motion
+        self._pending: FloatArray = _IDENTITY.copy()  # image motion since the previous frame
+        self._allocate((1, 1))
+
+    def _allocate(self, shape: tuple[int, int]) -> None:
+        self._shape = shape
+        self._grey = [np.zeros(shape, np.uint8), np.zeros(shape, np.uint8)]  # this, previous
+        self._warped = np.zeros(shape, np.uint8)
+        self._valid = np.zeros(shape, np.uint8)
+        self._full = np.full(shape, 255, np.uint8)
+        self._moving = np.zeros(shape, np.uint8)
+        self._integral = np.zeros((shape[0] + 1, shape[1] + 1), np.int32)
+
+    def _load(self, frame: Frame) -> bool:
+        """`frame` in grey into the current buffer; False if its size changed (start over)."""
+        shape = (int(frame.shape[0]), int(frame.shape[1]))
+        same = shape == self._shape
+        if not same:
+            self._allocate(shape)
+        self._grey.reverse()  # the last current frame becomes the previous one
+        if frame.ndim == 3 and frame.shape[2] == 3:
+            cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY, dst=self._grey[0])
+        else:
+            np.copyto(self._grey[0], to_grey(frame))
+        return same
 
     def reset(self, frame: Frame) -> None:
         """Start over from `frame`: no motion known until the next one."""
-        self._previous = np.ascontiguousarray(to_grey(frame))
+        self._load(frame)
+        self._have_previous = True
         self._pending = _IDENTITY.copy()
-        self._integral = None
+        self._known = False
 
     def transform(self, homography: FloatArray) -> None:
         """The image was warped by `homography` (a zoom step) since the last frame."""
@@ -43,36 +70,29 @@ class MotionMap:
     def update(self, frame: Frame, ego_motion: FloatArray | None) -> None:
         """Mark what moved from the previous frame to `frame`; `ego_motion` maps the previous
         frame's pixels into this one (None: the camera did not move)."""
-        grey = np.ascontiguousarray(to_grey(frame))
-        previous = self._previous
+        same = self._load(frame)
         motion = self._pending if ego_motion is None else ego_motion @ self._pending
-        self._previous, self._pending = grey, _IDENTITY.copy()
-        if previous is None or previous.shape != grey.shape:
-            self._integral = None
+        self._pending = _IDENTITY.copy()
+        self._known = same and self._have_previous
+        self._have_previous = True
+        if not self._known:
             return
+        grey, previous = self._grey
         size = (grey.shape[1], grey.shape[0])
-        if np.allclose(motion, _IDENTITY):
-            warped: NDArray[np.uint8] = previous
-            valid: NDArray[np.uint8] | None = None
-        else:
-            warped = np.asarray(
-                cv2.warpPerspective(previous, motion, size, flags=cv2.INTER_LINEAR), np.uint8
-            )
+        still = np.allclose(motion, _IDENTITY)
+        if not still:
+            cv2.warpPerspective(previous, motion, size, dst=self._warped, flags=cv2.INTER_LINEAR)
             # the part of this frame the previous one did not see is unknown, not moving
-            valid = np.asarray(
-                cv2.warpPerspective(
-                    np.full_like(previous, 255), motion, size, flags=cv2.INTER_NEAREST
-                ),
-                np.uint8,
-            )
-        moving = (cv2.absdiff(grey, warped) > self._threshold).astype(np.uint8)
-        if valid is not None:
-            moving[valid == 0] = 0
-        self._integral = np.asarray(cv2.integral(moving), np.int32)
+            cv2.warpPerspective(self._full, motion, size, dst=self._valid, flags=cv2.INTER_NEAREST)
+        cv2.absdiff(grey, previous if still else self._warped, dst=self._moving)
+        cv2.threshold(self._moving, self._threshold, 1, cv2.THRESH_BINARY, dst=self._moving)
+        if not still:
+            cv2.min(self._moving, self._valid, dst=self._moving)  # 1 where valid (255), else 0
+        cv2.integral(self._moving, sum=self._integral, sdepth=cv2.CV_32S)
 
     def moving_fraction(self, boxes: FloatArray) -> FloatArray | None:
         """Share of moving pixels in each centre-form box (M x 4); None when not known."""
-        if self._integral is None:
+        if not self._known:
             return None
         ii = self._integral
         height, width = ii.shape[0] - 1, ii.shape[1] - 1
