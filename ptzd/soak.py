@@ -419,6 +419,17 @@ async def _drain(stream: asyncio.StreamReader | None, sink: IO[bytes]) -> None:
         sink.flush()
 
 
+def rss_trend(rss: Sequence[float]) -> tuple[float, float] | None:
+    """(start, end) RSS of the samples after warm-up: the medians of their first and their
+    last quarter. A leak is a trend; the heap breathes by a few MB from one sample to the
+    next (a CI soak went 117 -> 124 -> 119.6 -> 122.6 MB in its last minute), so one sample
+    at each end would fail a steady daemon at random."""
+    if not rss:
+        return None
+    quarter = max(1, len(rss) // 4)
+    return statistics.median(rss[:quarter]), statistics.median(rss[-quarter:])
+
+
 def _percentile(values: Sequence[float], q: float) -> float | None:
     if not values:
         return None
@@ -728,13 +739,14 @@ class Soak:
             if '"level": "error"' in line or '"level": "critical"' in line
         ]  # fmt: skip
         elapsed = self.samples[-1]["t"] if self.samples else 0.0
-        growth = round(rss[-1] - rss[0], 2) if rss else None
+        trend = rss_trend(rss)
+        growth = round(trend[1] - trend[0], 2) if trend else None
         gaps = [b - a for a, b in zip(notify.pings, notify.pings[1:], strict=False)]
         summary = {
             "duration_s": round(elapsed, 1),
             "daemon_exit_code": exit_code,
-            "rss_mb_after_warmup": round(rss[0], 2) if rss else None,
-            "rss_mb_end": round(rss[-1], 2) if rss else None,
+            "rss_mb_after_warmup": round(trend[0], 2) if trend else None,
+            "rss_mb_end": round(trend[1], 2) if trend else None,
             "rss_growth_mb": growth,
             "fds_min_max": [min(fds), max(fds)] if fds else None,
             "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
@@ -854,15 +866,16 @@ def virtual_report(
         frames = int(sim_report.get("frames_processed", 0))
     except (OSError, ValueError):
         simulated, frames = 0.0, 0
-    growth = round(rss[-1] - rss[0], 2) if rss else None
+    trend = rss_trend(rss)
+    growth = round(trend[1] - trend[0], 2) if trend else None
     summary = {
         "asked_s": options.minutes * 60,
         "simulated_s": simulated,
         "frames_processed": frames,
         "wall_s": wall_s,
         "exit_code": exit_code,
-        "rss_mb_after_warmup": round(rss[0], 2) if rss else None,
-        "rss_mb_end": round(rss[-1], 2) if rss else None,
+        "rss_mb_after_warmup": round(trend[0], 2) if trend else None,
+        "rss_mb_end": round(trend[1], 2) if trend else None,
         "rss_growth_mb": growth,
         "fds_min_max": [min(fds), max(fds)] if fds else None,
         "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,

@@ -7,6 +7,7 @@ the report: clean exit, dome left stopped, no leaks, every fault recovered as do
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import os
 import subprocess
@@ -16,6 +17,7 @@ import time
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from ptzd.errors import UsageError
@@ -25,6 +27,7 @@ from ptzd.soak import (
     _probe_loop,
     draw_plots,
     proc_sample,
+    rss_trend,
     virtual_report,
 )
 
@@ -63,6 +66,19 @@ def test_plots_draw_every_sampled_series(tmp_path: Path) -> None:
     image = cv2.imread(str(tmp_path / "soak.png"))
     assert image is not None and image.shape[0] == 6 * 150 + 20
     assert (image[:, :, 2] > 200).sum() > 0 and (image[:, :, 0] < 100).sum() > 0
+
+
+def test_rss_trend_sees_a_leak_and_not_a_breathing_heap() -> None:
+    # a steady daemon's heap: +-4 MB from sample to sample around 120 MB
+    rng = np.random.default_rng(0)
+    breathing = list(120.0 + rng.uniform(-4.0, 4.0, 120))
+    start, end = rss_trend(breathing) or (0.0, 0.0)
+    assert abs(end - start) < 1.5
+    assert max(abs(b - a) for a, b in itertools.product(breathing[:3], breathing[-3:])) > 5
+    leaking = [100.0 + 0.5 * i for i in range(40)]  # 0.5 MB per sample
+    start, end = rss_trend(leaking) or (0.0, 0.0)
+    assert end - start == pytest.approx(15.0)  # medians of the first and the last 10
+    assert rss_trend([]) is None
 
 
 def test_probe_counts_tasks_only_while_the_loop_runs_some(tmp_path: Path) -> None:
