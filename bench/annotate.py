@@ -262,7 +262,9 @@ def cmd_review(args: argparse.Namespace) -> int:
         y1 = int(min(gt.size[1], cy + half_h))
         scale = tile_h / (2 * half_h)
         crop = frames[f][y0:y1, x0:x1]
-        size = (max(1, int((x1 - x0) * scale)), max(1, int((y1 - y0) * scale)))
+        # (int(), not round(): a crop must never come out a pixel larger than its tile)
+        size = (max(1, min(int((x1 - x0) * scale), int(2 * half_w * scale) + 2)),
+                max(1, min(int((y1 - y0) * scale), tile_h)))  # fmt: skip
         crop = np.asarray(cv2.resize(crop, size), dtype=np.uint8)
         tile = np.zeros((tile_h + 16, int(2 * half_w * scale) + 2, 3), np.uint8)
         tile[16 : 16 + crop.shape[0], : crop.shape[1]] = crop
