@@ -89,3 +89,23 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
     assert results["standing"][-1] is TrackState.LOST
     assert set(results["walking"]) == {TrackState.TRACKING}
     assert set(results["standing, test off"]) == {TrackState.TRACKING}
+
+
+def test_a_still_box_is_let_go_while_the_zoom_hunts() -> None:
+    # the 24-hour soak's 6-hour lock: a still object, the zoom stepping in and out on it
+    # every few seconds; each step rescales the image, and that is not motion
+    scene = Scene(velocity=(0.0, 0.0))
+    tracker = make_tracker(TrackerConfig(stillness={"still_frames": 25}))
+    tracker.init(scene.frame(0), scene.truth(0))
+    factor, states = 1.0, []
+    for t in range(1, 60):
+        if t % 8 == 0:  # a zoom step: in, out, in, ...
+            step = 1.1 if (t // 8) % 2 else 1 / 1.1
+            factor *= step
+            tracker.rescale(step, (160.0, 120.0))
+        c = 1 - factor
+        zoom = np.array([[factor, 0, 160 * c], [0, factor, 120 * c], [0, 0, 1]])
+        view = np.asarray(cv2.warpPerspective(scene.frame(t), zoom, (320, 240)), np.uint8)
+        states.append(tracker.update(view).state)
+    assert states[:20] == [TrackState.TRACKING] * 20
+    assert TrackState.LOST in states[25:]
