@@ -92,8 +92,8 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
 
 
 def test_a_still_box_is_let_go_while_the_zoom_hunts() -> None:
-    # the 24-hour soak's 6-hour lock: a still object, the zoom stepping in and out on it
-    # every few seconds; each step rescales the image, and that is not motion
+    # a still object with the zoom stepping in and out on it every few seconds: each step
+    # rescales the image, and that is not motion
     scene = Scene(velocity=(0.0, 0.0))
     tracker = make_tracker(TrackerConfig(stillness={"still_frames": 25}))
     tracker.init(scene.frame(0), scene.truth(0))
