@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from ptzd.vision.config import ResamplingConfig, TrackerConfig
 from ptzd.vision.likelihood import FloatArray, Frame, Likelihood
 from ptzd.vision.stillness import MotionMap
-from ptzd.vision.tracking import Box, TrackResult, TrackState
+from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 # Column indices of the particle state.
 X, VX, Y, VY, W, H = range(6)
@@ -156,11 +156,9 @@ class ParticleTracker:
         return self._weights
 
     def init(self, frame: Frame, box: Box) -> None:
-        x, y, w, h = (float(v) for v in box)
-        if not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0:
-            raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+        centre = centre_box(box, check=True)
+        w, h = float(centre[2]), float(centre[3])
         self._rng = np.random.default_rng(self._config.seed)
-        centre = np.array([x + w / 2, y + h / 2, w, h])
         target = np.array([centre[0], 0.0, centre[1], 0.0, w, h])
         n = self._config.num_particles
         # seed eq. 13: S_initial = I s_target + r.v.
@@ -273,10 +271,9 @@ class ParticleTracker:
         self._likelihood.rescale(factor)
 
     def resembles(self, frame: Frame, box: Box) -> bool:
-        x, y, w, h = (float(v) for v in box)
-        centre = np.array([x + w / 2, y + h / 2, w, h])
         share = self._config.occlusion.match_share
-        return self._likelihood.similarity(frame, centre) >= self._share_of_usual(share)
+        similarity = self._likelihood.similarity(frame, centre_box(box))
+        return similarity >= self._share_of_usual(share)
 
     @property
     def state(self) -> TrackState:

@@ -49,7 +49,7 @@ from ptzd.vision.particle_filter import (
     ego_motion_matrix,
     weighted_resample,
 )
-from ptzd.vision.tracking import Box, TrackResult, TrackState
+from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0  # pixels: boxes never shrink below this
 
@@ -239,13 +239,10 @@ class RfTracker:
     # -- Tracker API ----------------------------------------------------------------------
 
     def init(self, frame: Frame, box: Box) -> None:
-        x, y, w, h = (float(v) for v in box)
-        if not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0:
-            raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+        self._box = centre_box(box, check=True)
         rf = self._rf_config
         self._rng = np.random.default_rng(self._config.seed)
         self.memory = TrainingMemory(rf.positives, rf.negatives, rf.kept_positives)
-        self._box = np.array([x + w / 2, y + h / 2, w, h])
         self._centres.clear()
         self._centres.append(self._box[:2].copy())
         self._velocity = np.zeros(2)
@@ -311,8 +308,7 @@ class RfTracker:
 
     def resembles(self, frame: Frame, box: Box) -> bool:
         """The forests call it positive (P > 0.5), as they call the target's own boxes."""
-        x, y, w, h = (float(v) for v in box)
-        centre = np.array([[x + w / 2, y + h / 2, w, h]])
+        centre = centre_box(box)[None]
         # fresh maps: the frame's cached ones cover the particles, not necessarily this box
         grey, cfg = to_grey(frame), self._rf_config
         region = region_of(self._cover(centre), grey.shape)

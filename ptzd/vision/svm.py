@@ -28,7 +28,7 @@ from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix
 from ptzd.vision.rf import sample_negatives
-from ptzd.vision.tracking import Box, TrackResult, TrackState
+from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0
 # LK template = the box grown by this factor (context around the target; ours).
@@ -222,13 +222,10 @@ class SvmTracker:
         return maps.histograms(boxes)
 
     def init(self, frame: Frame, box: Box) -> None:
-        x, y, w, h = (float(v) for v in box)
-        if not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0:
-            raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+        self._box = centre_box(box, check=True)
         cfg = self._svm_config
         self._rng = np.random.default_rng(self._config.seed)
-        self._box = np.array([x + w / 2, y + h / 2, w, h])
-        self._reference = np.array([w, h])
+        self._reference = self._box[2:].copy()
         bgr = to_bgr(frame)
         # seed Fig. 3: positives are the boxes closest to the init box
         near = self._jitter(self._box, cfg.positives - 1, 0.05, 0.03)
@@ -276,15 +273,13 @@ class SvmTracker:
             self.lk_error = self.lk.track(grey)
             box = self.lk.box()
             if self.lk_error > cfg.lk_error or not self._sane(box, frame.shape):
-                self.mode = Mode.PF
-                self._particles = self._jitter(self._box, cfg.num_particles, cfg.sigma_xy, 0.0)
+                self._start_particles()
         if self.mode is Mode.LK:
             confidence = float(self.model.probability(self._features(bgr, box[None]))[0])
             if cfg.lk_min_confidence and confidence < cfg.lk_min_confidence:
                 # LK's template slid off the walker (it still fits the background it now
                 # holds); the SVM no longer agrees: the learned PF takes over this frame
-                self.mode = Mode.PF
-                self._particles = self._jitter(self._box, cfg.num_particles, cfg.sigma_xy, 0.0)
+                self._start_particles()
         if self.mode is Mode.PF:
             box, confidence = self._particle_step(bgr)
         self._confidence = confidence
@@ -310,6 +305,12 @@ class SvmTracker:
                 self._retrain(bgr)
         self._velocity = self._box[:2] - previous[:2]
         return self._result()
+
+    def _start_particles(self) -> None:
+        """Hand over from LK to the learned PF: a particle cloud around the last box."""
+        cfg = self._svm_config
+        self.mode = Mode.PF
+        self._particles = self._jitter(self._box, cfg.num_particles, cfg.sigma_xy, 0.0)
 
     def _sane(self, box: FloatArray, shape: tuple[int, ...]) -> bool:
         """LK's box is plausible: finite, in the frame, size within 2x of the last box."""
@@ -347,8 +348,7 @@ class SvmTracker:
 
     def resembles(self, frame: Frame, box: Box) -> bool:
         """The SVM scores it as a tracked (not occluded) target would score."""
-        x, y, w, h = (float(v) for v in box)
-        centre = np.array([[x + w / 2, y + h / 2, w, h]])
+        centre = centre_box(box)[None]
         confidence = float(self.model.probability(self._features(to_bgr(frame), centre))[0])
         return confidence >= self._svm_config.occluded_below
 

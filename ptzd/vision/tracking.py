@@ -18,6 +18,15 @@ from ptzd.vision.config import TrackerConfig
 Box = tuple[float, float, float, float]
 
 
+def centre_box(box: Box, *, check: bool = False) -> NDArray[np.float64]:
+    """`(x, y, w, h)` in the centre form `[cx, cy, w, h]` the trackers work in. With `check`
+    (an init box): ValueError unless it is finite with a positive size."""
+    x, y, w, h = (float(v) for v in box)
+    if check and (not all(np.isfinite([x, y, w, h])) or w <= 0 or h <= 0):
+        raise ValueError(f"box must have finite coordinates and positive size, got {box}")
+    return np.array([x + w / 2, y + h / 2, w, h])
+
+
 class TrackState(StrEnum):
     """What the tracker believes about its target this frame."""
 
