@@ -79,6 +79,25 @@ def test_dome_estimate_dead_reckons_commands() -> None:
     assert estimate.advance(1.0) == pose
 
 
+def test_dome_estimate_stops_where_the_dome_does() -> None:
+    """A zoom held past the lens's end, or a tilt past its limit, moves the estimate no
+    further than the dome: the tracker must not be told of a zoom that is not happening."""
+    model = DomeModelConfig(hfov_wide=60.0, hfov_tele=3.0, tilt_min=-90.0, tilt_max=10.0)
+    estimate = DomeEstimate(model, zoom_log_rate=0.75, start=Pose(0.0, 0.0, 50.0))
+    estimate.command(0, 63, -1)  # zoom out and tilt up, for a long time
+    for _ in range(100):
+        pose = estimate.advance(0.1)
+    assert pose.hfov == pytest.approx(60.0) and pose.tilt == pytest.approx(10.0)
+    before = estimate.pose
+    assert estimate.advance(0.1) == before  # at both ends: not moving at all
+    estimate.command(0, -63, 1)
+    for _ in range(200):
+        pose = estimate.advance(0.1)
+    assert pose.hfov == pytest.approx(3.0) and pose.tilt == pytest.approx(-90.0)
+    with pytest.raises(ValueError, match="tilt_min"):
+        DomeModelConfig(tilt_min=20.0, tilt_max=10.0)
+
+
 def test_zoom_then_rotation_at_the_new_fov_is_the_full_homography() -> None:
     # The daemon gives the tracker the zoom as rescale(factor, centre) and then the rotation
     # taken at the new FOV as ego-motion; together they must equal K_b R_b^T R_a K_a^-1.

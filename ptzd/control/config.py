@@ -108,7 +108,9 @@ class DomeModelConfig(StrictModel):
 
     Speed byte s (1..63) turns at `speed_min * (speed_max / speed_min) ** ((s - 1) / 62)` deg/s
     (exponential) or linearly from speed_min to speed_max; tilt is capped at tilt_speed_max.
-    Used to turn the seed's speeds into angular rates and for ego-motion without a pose.
+    Used to turn the seed's speeds into angular rates and for ego-motion without a pose;
+    the estimated pose stops at the lens's ends (`hfov_wide`, `hfov_tele`) and the tilt
+    limits, as the dome does.
     """
 
     speed_curve: Literal["exponential", "linear"] = "exponential"
@@ -117,6 +119,8 @@ class DomeModelConfig(StrictModel):
     tilt_speed_max: float = Field(default=40.0, gt=0.0, le=1000.0)
     hfov_wide: float = Field(default=60.0, gt=0.05, lt=179.0)
     hfov_tele: float = Field(default=3.0, gt=0.05, lt=179.0)
+    tilt_min: float = Field(default=-90.0, ge=-90.0, le=90.0)
+    tilt_max: float = Field(default=90.0, ge=-90.0, le=90.0)
 
     @model_validator(mode="after")
     def _min_below_max(self) -> Self:
@@ -124,6 +128,8 @@ class DomeModelConfig(StrictModel):
             raise ValueError(
                 f"speed_min ({self.speed_min}) must be below speed_max ({self.speed_max})"
             )
+        if self.tilt_min >= self.tilt_max:
+            raise ValueError(f"tilt_min ({self.tilt_min}) must be below tilt_max ({self.tilt_max})")
         if self.hfov_tele >= self.hfov_wide:
             raise ValueError(
                 f"hfov_tele ({self.hfov_tele}) must be below hfov_wide ({self.hfov_wide})"

@@ -132,8 +132,13 @@ class DomeEstimate:
         self.time += dt
         pan = self.pose.pan + rate_for_byte(self._pan_speed, self.model) * dt
         tilt = self.pose.tilt + rate_for_byte(self._tilt_speed, self.model, tilt=True) * dt
+        tilt = min(max(tilt, self.model.tilt_min), self.model.tilt_max)
         hfov = self.pose.hfov
         if self._zoom:
             hfov = hfov_after_factor(hfov, math.exp(self._zoom * self.zoom_log_rate * dt))
+            # the lens stops at its ends; an estimate that went on would rescale the
+            # tracker's box every frame for a zoom that is not happening (the real-time
+            # soak's boxes shrank to 0.1 px while the dome, at its widest, was "widening")
+            hfov = min(max(hfov, self.model.hfov_tele), self.model.hfov_wide)
         self.pose = Pose(pan, tilt, hfov)
         return self.pose
