@@ -350,17 +350,20 @@ class NotifySocket:
 
 
 def proc_sample(pid: int) -> dict[str, float]:
-    """RSS (MB) and open file descriptors of a live process, from /proc."""
-    rss_kb = 0
+    """RSS (MB), its anonymous part (the heap, where a leak would show; the rest is pages
+    of mapped files such as the libraries) and open file descriptors, from /proc."""
+    rss_kb = anon_kb = 0
     with contextlib.suppress(OSError):
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
             if line.startswith("VmRSS:"):
                 rss_kb = int(line.split()[1])
+            elif line.startswith("RssAnon:"):
+                anon_kb = int(line.split()[1])
     try:
         fds = sum(1 for _ in Path(f"/proc/{pid}/fd").iterdir())
     except OSError:
         fds = -1
-    return {"rss_mb": rss_kb / 1024, "fds": fds}
+    return {"rss_mb": rss_kb / 1024, "rss_anon_mb": anon_kb / 1024, "fds": fds}
 
 
 def _last_probe(path: Path) -> dict[str, Any]:

@@ -56,6 +56,16 @@ def test_proc_sample_sees_a_new_file_descriptor() -> None:
     assert 5 < before["rss_mb"] < 10_000
 
 
+def test_proc_sample_sees_the_heap_grow_in_the_anonymous_part() -> None:
+    before = proc_sample(os.getpid())
+    block = bytearray(64 * 1024 * 1024)  # zero pages are not resident until written
+    block[:: 4096] = b"x" * len(range(0, len(block), 4096))
+    after = proc_sample(os.getpid())
+    del block
+    assert 0 < before["rss_anon_mb"] < before["rss_mb"]
+    assert after["rss_anon_mb"] - before["rss_anon_mb"] > 60
+
+
 def test_plots_draw_every_sampled_series(tmp_path: Path) -> None:
     samples = [
         {"t": float(t), "rss_mb": 90 + t / 10, "fds": 11, "tasks": 16, "lag_ms": 0.2,
