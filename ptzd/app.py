@@ -40,6 +40,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
+import numpy as np
+import numpy.typing as npt
+
 from ptzd.capture import FrameItem, FrameSource
 from ptzd.clock import Clock
 from ptzd.config import Config
@@ -54,7 +57,8 @@ from ptzd.sim.camera_model import Pose
 from ptzd.vision.acquisition import AcqState, Acquirer, Decision, Transition
 from ptzd.vision.acquisition import TrackResult as AcqTrack
 from ptzd.vision.detect.types import Detector
-from ptzd.vision.tracking import Tracker, TrackResult, TrackState
+from ptzd.vision.particle_filter import apply_homography
+from ptzd.vision.tracking import Tracker, TrackResult, TrackState, centre_box
 
 if TYPE_CHECKING:
     from ptzd.mqtt.bridge import MqttBridge
@@ -469,12 +473,16 @@ class Daemon:
         resembles = None
         if tracker is not None:
             resembles = functools.partial(tracker.resembles, frame.image)
+        image_motion = None
+        if moving:
+            image_motion = functools.partial(_move_box, view_homography(frame.size, before, pose))
         return self.acquirer.update(
             frame.capture_time,
             detections if ran else None,
             track,
             camera_moving=moving,
             resembles=resembles,
+            image_motion=image_motion,
         )
 
     @staticmethod
@@ -732,6 +740,13 @@ def daemon_detector(config: Config) -> Detector | None:
     from ptzd.vision.detect.factory import build_detector
 
     return build_detector(config.detector)
+
+
+def _move_box(homography: npt.NDArray[np.float64], box: BoxTuple) -> BoxTuple:
+    """`box` (x, y, w, h) of the previous frame where `homography` puts it in this one."""
+    mapped, _ = apply_homography(homography, centre_box(box)[None, :], np.zeros((1, 2)))
+    cx, cy, w, h = (float(v) for v in mapped[0])
+    return (cx - w / 2, cy - h / 2, w, h)
 
 
 def _reidentified(decision: Decision) -> bool:

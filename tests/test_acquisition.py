@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 
 from ptzd.vision.acquisition import AcqState, Acquirer, Decision, TrackResult, Transition
 from ptzd.vision.acquisition_config import AcquisitionConfig
-from ptzd.vision.detect.types import Detection
+from ptzd.vision.detect.types import Box, Detection
 
 SIZE = (640, 480)
 DT = 0.1  # 10 frames per second
@@ -199,6 +201,66 @@ def test_camera_motion_is_not_mistaken_for_a_static_target() -> None:
     for _ in range(50):  # the dome follows: the box stays centred in the view
         decision = run.step(None, TrackResult((300, 200, 30, 80)), moving=True)
     assert decision.state is AcqState.TRACKING
+
+
+def _shift(dx: float) -> Callable[[Box], Box]:
+    """The image motion of a pan that moves the scene `dx` pixels across the view."""
+    return lambda box: (box[0] + dx, box[1], box[2], box[3])
+
+
+def test_a_box_still_in_the_world_is_static_while_the_dome_hunts_about_it() -> None:
+    """The 24-hour soak's lock: the dome panning to and fro about a box on an edge of
+    something still, the box sliding in the view by exactly the camera's motion. Told the
+    image motion, the acquirer sees it static and lets it go; not told, it never could."""
+    for told in (True, False):
+        run = Run(static_s=2.0)
+        run.lock(det(300, 200))
+        box, states = (300.0, 200.0, 30.0, 80.0), []
+        for i in range(60):
+            dx = 6.0 if (i // 5) % 2 else -6.0  # pan one way for 0.5 s, then back
+            box = (box[0] + dx, box[1], box[2], box[3])
+            run.now = round(run.now + DT, 6)
+            motion = _shift(dx) if told else None
+            decision = run.acq.update(
+                run.now, None, TrackResult(box), camera_moving=True, image_motion=motion
+            )
+            states.append(decision.state)
+        if told:
+            assert AcqState.SEARCHING in states and run.events[-1].reason == "static"
+            assert run.now - 0.3 >= 2.0  # not before static_s after the lock
+        else:
+            assert set(states) == {AcqState.TRACKING}
+
+
+def test_a_walker_the_dome_follows_is_not_static() -> None:
+    """Centred in the view while the dome turns after them: moving in the world."""
+    run = Run(static_s=2.0)
+    run.lock(det(300, 200))
+    for _ in range(60):
+        run.now = round(run.now + DT, 6)
+        decision = run.acq.update(
+            run.now, None, TrackResult((300, 200, 30, 80)), camera_moving=True,
+            image_motion=_shift(-3.0),
+        )  # fmt: skip
+    assert decision.state is AcqState.TRACKING
+
+
+def test_remembered_boxes_move_with_the_view() -> None:
+    """A static box remembered as ignored is still ignored after the dome turned: where the
+    turn put it, not where it was in the view."""
+    run = Run(static_s=1.0, ignore_static_s=60.0, revalidate_s=0.5)
+    sign = det(200, 200, 40, 90)
+    run.lock(sign)
+    for _ in range(30):
+        detections: list[Detection] | None = [] if run.acq.wants_detection(run.now + DT) else None
+        run.step(detections, TrackResult(sign.box))
+    assert run.events[-1].reason == "static"
+    run.now = round(run.now + DT, 6)
+    run.acq.update(run.now, None, None, camera_moving=True, image_motion=_shift(150.0))
+    moved = det(350, 200, 40, 90)  # the same sign, 150 px to the right in the new view
+    for _ in range(10):
+        assert run.step([moved]).state is AcqState.SEARCHING
+    Run().lock(moved)  # (not remembered, it is locked at once)
 
 
 def test_minimum_time_before_switching_targets() -> None:

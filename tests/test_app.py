@@ -348,3 +348,26 @@ async def test_a_select_after_a_manual_move_is_kept_with_acquisition_on() -> Non
     reasons = [t.reason for item in after for t in item.transitions]
     assert reasons[:1] == ["selected"] and "reset" not in reasons
     assert after and all(item.published_state == "tracking" for item in after)
+
+
+def test_the_acquirers_boxes_move_with_the_view() -> None:
+    """What the daemon hands the acquirer as image motion: a box on something still in the
+    world, carried from one pose's view to the next (pan right: it slides left by f tan;
+    zoom in 2x: it doubles about the view centre)."""
+    from ptzd.app import _move_box
+    from ptzd.control.egomotion import view_homography
+    from ptzd.sim.camera_model import Pose, focal_length
+
+    size = (640, 480)
+    box = (305.0, 200.0, 30.0, 80.0)  # centred horizontally
+    panned = _move_box(view_homography(size, Pose(0.0, 0.0, 60.0), Pose(5.0, 0.0, 60.0)), box)
+    shift = focal_length(640, 60.0) * np.tan(np.radians(5.0))
+    assert panned[0] + panned[2] / 2 == pytest.approx(320.0 - shift, abs=0.01)
+    assert panned[3] == pytest.approx(80.0, rel=0.01)
+    tele = 2 * np.degrees(np.arctan(np.tan(np.radians(30.0)) / 2))  # half the focal width
+    zoomed = _move_box(view_homography(size, Pose(0.0, 0.0, 60.0), Pose(0.0, 0.0, tele)), box)
+    assert zoomed == pytest.approx((290.0, 160.0, 60.0, 160.0), abs=0.01)  # centre stays
+    off_centre = _move_box(
+        view_homography(size, Pose(0.0, 0.0, 60.0), Pose(0.0, 0.0, tele)), (100, 100, 20, 40)
+    )
+    assert off_centre == pytest.approx((-120.0, -40.0, 40.0, 80.0), abs=0.01)  # centre -> (-100, 0)

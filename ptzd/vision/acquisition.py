@@ -8,6 +8,7 @@ tracker on when a lock is made, and whether to send the camera home. State machi
     searching --(candidate seen persist_frames frames, allowed by policy)--> tracking
     tracking  --(tracker reports occlusion or loses the target)--> occluded
     tracking  --(box static for static_s with no detection confirming it)--> searching
+              (static in the world when the caller says how the camera moved the image)
     occluded  --(tracker recovers)--> tracking; --(detection near last box)--> tracking
     occluded  --(occluded_timeout_s)--> lost
     lost      --(recovered / re-identified / new candidate)--> tracking
@@ -319,15 +320,24 @@ class Acquirer:
         *,
         camera_moving: bool = False,
         resembles: Callable[[Box], bool] | None = None,
+        image_motion: Callable[[Box], Box] | None = None,
     ) -> Decision:
         """Advance the state machine by one frame; see the module docstring.
 
         `resembles` is the tracker's appearance test (`Tracker.resembles` on this frame): a
-        detection re-identifies the lost target only if it passes."""
+        detection re-identifies the lost target only if it passes.
+
+        `image_motion` maps a box of the previous frame to where the camera's motion since
+        then put it in this frame. Given, every box the acquirer remembers (the target's
+        anchor, its last box, candidates, ignored boxes) moves with the view, and the static
+        rule measures in the world: a box that stays put while the dome turns is static. Not
+        given while `camera_moving`, the motion is unknown and restarts the static clock."""
         cfg = self._cfg
         out: list[Transition] = []
         lock_box: Box | None = None
         go_home = False
+        if image_motion is not None:
+            self._follow_view(image_motion)
         if detections is not None:
             self._last_detection_t = now
             self._associate(detections, now)
@@ -346,7 +356,8 @@ class Acquirer:
                 self._go(now, AcqState.RETURNING_HOME, "search_timeout", out)
 
         elif state is AcqState.TRACKING:
-            lock_box = self._keep_tracking(now, detections, track, camera_moving, out)
+            unknown_motion = camera_moving and image_motion is None
+            lock_box = self._keep_tracking(now, detections, track, unknown_motion, out)
 
         elif state in (AcqState.OCCLUDED, AcqState.LOST):
             if track is not None and track.box is not None and not track.occluded:
@@ -398,6 +409,18 @@ class Acquirer:
             target = None
         return Decision(self._state, target, lock_box, go_home, tuple(out))
 
+    def _follow_view(self, move: Callable[[Box], Box]) -> None:
+        """Carry every remembered box of the previous frame into this one (see `update`)."""
+        target = self._target
+        if target is not None:
+            target.box, target.anchor = move(target.box), move(target.anchor)
+        if self._last_box is not None:
+            self._last_box = move(self._last_box)
+        for candidate in self._candidates:
+            candidate.box = move(candidate.box)
+        for ignored in self._ignored:
+            ignored.box = move(ignored.box)
+
     def _try_acquire(self, now: float, out: list[Transition]) -> Box | None:
         ready = self._confirmed_candidates(now)
         if not ready:
@@ -410,7 +433,7 @@ class Acquirer:
         now: float,
         detections: Sequence[Detection] | None,
         track: TrackResult | None,
-        camera_moving: bool,
+        unknown_motion: bool,
         out: list[Transition],
     ) -> Box | None:
         cfg = self._cfg
@@ -427,7 +450,7 @@ class Acquirer:
         target.box = track.box
         self._last_box = track.box
         still_px = max(cfg.static_px, cfg.static_fraction * track.box[3])
-        if camera_moving or _moved(track.box, target.anchor) > still_px:
+        if unknown_motion or _moved(track.box, target.anchor) > still_px:
             target.anchor, target.anchor_t = track.box, now
         if detections is not None and any(
             iou(d.box, track.box) >= cfg.confirm_iou for d in detections
@@ -436,7 +459,7 @@ class Acquirer:
         if target.pinned:
             return None
         if (
-            not camera_moving
+            not unknown_motion
             and now - target.anchor_t >= cfg.static_s
             and now - target.confirmed_t >= cfg.static_s
         ):
