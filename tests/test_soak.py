@@ -59,7 +59,7 @@ def test_proc_sample_sees_a_new_file_descriptor() -> None:
 def test_proc_sample_sees_the_heap_grow_in_the_anonymous_part() -> None:
     before = proc_sample(os.getpid())
     block = bytearray(64 * 1024 * 1024)  # zero pages are not resident until written
-    block[:: 4096] = b"x" * len(range(0, len(block), 4096))
+    block[::4096] = b"x" * len(range(0, len(block), 4096))
     after = proc_sample(os.getpid())
     del block
     assert 0 < before["rss_anon_mb"] < before["rss_mb"]
