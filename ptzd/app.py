@@ -362,7 +362,8 @@ class Daemon:
     def _pose_at(self, frame: FrameItem) -> Pose:
         if frame.pose is not None:
             return frame.pose
-        return self.estimate.advance_to(frame.capture_time)
+        # (the frame may be older than commands sent since: the pose when it was taken)
+        return self.estimate.pose_at(frame.capture_time)
 
     async def _vision(self) -> None:
         tracker: Tracker | None = None

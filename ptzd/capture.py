@@ -75,10 +75,14 @@ def is_live(uri: str) -> bool:
 class VideoCaptureSource:
     """cv2.VideoCapture in its own thread. Files are paced at their frame rate on the clock."""
 
-    def __init__(self, uri: str, clock: Clock, *, paced: bool | None = None) -> None:
+    def __init__(
+        self, uri: str, clock: Clock, *, paced: bool | None = None, latency_s: float = 0.0
+    ) -> None:
         self.uri = uri
         self.clock = clock
         self.paced = (not is_live(uri)) if paced is None else paced
+        # a frame's capture time is when it was taken: this long before `read()` returns it
+        self.latency_s = latency_s
         self.frames_read = 0
 
     async def frames(self) -> AsyncIterator[FrameItem]:
@@ -120,8 +124,8 @@ class VideoCaptureSource:
                                     await self.clock.sleep(delay)
                             self.frames_read += 1
                             attempt = 0
-                            yield FrameItem(image, self.clock.now(), index, None,
-                                            time.perf_counter())  # fmt: skip
+                            taken = self.clock.now() - self.latency_s
+                            yield FrameItem(image, taken, index, None, time.perf_counter())
                             index += 1
                         if not live or index == first == 0:
                             _log.info("capture_ended", uri=self.uri, frames=index)

@@ -12,9 +12,9 @@ import os
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Self
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, model_validator
 
 from ptzd.control.config import ControlConfig
 from ptzd.errors import ConfigError
@@ -47,6 +47,9 @@ class CaptureConfig(StrictModel):
     """Where frames come from: a file, RTSP/HTTP URL, V4L2 device, or `sim`."""
 
     source: str = Field(default="sim", min_length=1)
+    # how old a frame is when cv2 hands it over (exposure, encoding, network, the decoder's
+    # buffer): the dome's pose for a frame is its pose this long before it arrived
+    latency_s: float = Field(default=0.0, ge=0.0, le=2.0)
 
 
 class Config(StrictModel):
@@ -62,6 +65,16 @@ class Config(StrictModel):
     control: ControlConfig = ControlConfig()
     mqtt: MqttConfig = MqttConfig()
     sim: SimConfig = SimConfig()
+
+    @model_validator(mode="after")
+    def _frames_younger_than_stale(self) -> Self:
+        if self.capture.latency_s >= self.control.max_track_age_s:
+            raise ValueError(
+                f"capture.latency_s ({self.capture.latency_s}) must be below "
+                f"control.max_track_age_s ({self.control.max_track_age_s}): every frame "
+                "would arrive stale"
+            )
+        return self
 
 
 def _parse_env_value(raw: str) -> object:

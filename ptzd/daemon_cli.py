@@ -93,7 +93,7 @@ async def run_daemon(config: Config, init: tuple[float, float, float, float] | N
     clock = RealClock()
     detector = daemon_detector(config)  # before anything opens: a bad codebook exits 2
     notifier = Notifier.from_environ()
-    source = VideoCaptureSource(config.capture.source, clock)
+    source = VideoCaptureSource(config.capture.source, clock, latency_s=config.capture.latency_s)
     loop = asyncio.get_running_loop()
     async with (
         PelcoLink(config.serial, clock=clock) as link,

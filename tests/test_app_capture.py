@@ -55,6 +55,17 @@ async def test_file_frames_are_decoded_and_paced_on_the_clock(tmp_path: Path) ->
     assert times[-1] - times[0] == pytest.approx(11 / 20.0, abs=0.06)  # paced at 20 fps
 
 
+async def test_frames_are_stamped_when_taken_not_when_they_arrive(tmp_path: Path) -> None:
+    """With `latency_s` a frame's capture time is its arrival less the latency: the time
+    the dome's pose is looked up for it."""
+    video = tmp_path / "walk.avi"
+    write_video(video, frames=3, fps=20.0)
+    clock = VirtualClock(start=100.0)
+    source = VideoCaptureSource(str(video), clock, paced=False, latency_s=0.25)
+    times = [item.capture_time async for item in source.frames()]
+    assert times == [pytest.approx(99.75)] * 3  # the clock stood still at 100 s
+
+
 async def test_unopenable_source_is_a_clear_error(tmp_path: Path) -> None:
     source = VideoCaptureSource(str(tmp_path / "missing.avi"), VirtualClock())
     with pytest.raises(CaptureError) as info:

@@ -98,6 +98,28 @@ def test_dome_estimate_stops_where_the_dome_does() -> None:
         DomeModelConfig(tilt_min=20.0, tilt_max=10.0)
 
 
+def test_dome_estimate_recalls_the_pose_at_a_past_time() -> None:
+    """A frame taken before the latest commands is tracked in the pose of its own time:
+    the estimate replays the commands in force then, not the ones sent since."""
+    model = DomeModelConfig()
+    estimate = DomeEstimate(model, zoom_log_rate=0.75, start=Pose(0.0, 0.0, 60.0), time=0.0)
+    truth: dict[float, Pose] = {}
+    for step, (pan, tilt, zoom) in enumerate([(63, 0, 0), (-40, 20, 1), (0, 0, -1), (0, 0, 0)]):
+        for k in range(5):
+            t = round(step * 0.5 + k * 0.1, 6)
+            truth[t] = estimate.advance_to(t)
+        estimate.advance_to(round(step * 0.5 + 0.5, 6))
+        estimate.command(pan, tilt, zoom)
+    for t, pose in truth.items():
+        recalled = estimate.pose_at(t)
+        assert (recalled.pan, recalled.tilt, recalled.hfov) == pytest.approx(
+            (pose.pan, pose.tilt, pose.hfov)
+        ), t
+    assert estimate.pose_at(-5.0) == Pose(0.0, 0.0, 60.0)  # before it all: the start
+    later = estimate.pose_at(10.0)  # a later time advances the estimate itself
+    assert estimate.time == 10.0 and estimate.pose == later
+
+
 def test_zoom_then_rotation_at_the_new_fov_is_the_full_homography() -> None:
     # The daemon gives the tracker the zoom as rescale(factor, centre) and then the rotation
     # taken at the new FOV as ego-motion; together they must equal K_b R_b^T R_a K_a^-1.

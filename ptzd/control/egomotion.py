@@ -12,6 +12,7 @@ sent through `DomeModelConfig` (the daemon's belief about the dome's speed curve
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 import numpy.typing as npt
@@ -21,6 +22,8 @@ from ptzd.pelco.codec import MAX_SPEED as PELCO_MAX_SPEED
 from ptzd.sim.camera_model import Pose, intrinsics, rotation
 
 Matrix = npt.NDArray[np.float64]
+
+_HISTORY = 256  # commands remembered by DomeEstimate: at 20 Hz, over 12 s of changes
 
 __all__ = [
     "DomeEstimate",
@@ -96,7 +99,11 @@ def byte_for_rate(rate: float, model: DomeModelConfig, *, max_speed: int = PELCO
 
 
 class DomeEstimate:
-    """Dead-reckoned dome pose from the commands sent (pan/tilt speeds, zoom direction)."""
+    """Dead-reckoned dome pose from the commands sent (pan/tilt speeds, zoom direction).
+
+    It remembers the last `_HISTORY` commands with the pose each started from, so the pose
+    at a past time (a frame's capture time, older than the commands sent since) is exact
+    too: `pose_at`."""
 
     def __init__(
         self, model: DomeModelConfig, zoom_log_rate: float, start: Pose, time: float = 0.0
@@ -105,19 +112,25 @@ class DomeEstimate:
         self.zoom_log_rate = zoom_log_rate
         self.pose = start
         self.time = time
-        self._pan_speed = 0
-        self._tilt_speed = 0
-        self._zoom = 0
+        self._motion = (0, 0, 0)  # pan speed, tilt speed, zoom in force
+        self._history: deque[tuple[float, Pose, tuple[int, int, int]]] = deque(maxlen=_HISTORY)
+        self._remember()
+
+    def _remember(self) -> None:
+        self._history.append((self.time, self.pose, self._motion))
 
     def command(self, pan_speed: int, tilt_speed: int, zoom: int) -> None:
         """The motion now in force (Pelco signed speeds; zoom -1 out, 0, +1 in)."""
-        self._pan_speed, self._tilt_speed, self._zoom = pan_speed, tilt_speed, zoom
+        self._motion = (pan_speed, tilt_speed, zoom)
+        self._remember()
 
     def reset(self, pose: Pose, time: float | None = None) -> None:
         """Replace the estimate with a known pose (e.g. one reported with a frame)."""
         self.pose = pose
         if time is not None:
             self.time = time
+        self._history.clear()
+        self._remember()
 
     def advance_to(self, time: float) -> Pose:
         """`advance` to an absolute time; earlier times change nothing."""
@@ -130,15 +143,29 @@ class DomeEstimate:
         if dt <= 0:
             return self.pose
         self.time += dt
-        pan = self.pose.pan + rate_for_byte(self._pan_speed, self.model) * dt
-        tilt = self.pose.tilt + rate_for_byte(self._tilt_speed, self.model, tilt=True) * dt
+        self.pose = self._integrate(self.pose, self._motion, dt)
+        return self.pose
+
+    def pose_at(self, time: float) -> Pose:
+        """The pose at `time`: advanced to it if it is later, else recalled from the
+        commands remembered (the oldest remembered pose for a time before them all)."""
+        if time >= self.time:
+            return self.advance_to(time)
+        for started, pose, motion in reversed(self._history):
+            if started <= time:
+                return self._integrate(pose, motion, time - started)
+        return self._history[0][1]
+
+    def _integrate(self, pose: Pose, motion: tuple[int, int, int], dt: float) -> Pose:
+        pan_speed, tilt_speed, zoom = motion
+        pan = pose.pan + rate_for_byte(pan_speed, self.model) * dt
+        tilt = pose.tilt + rate_for_byte(tilt_speed, self.model, tilt=True) * dt
         tilt = min(max(tilt, self.model.tilt_min), self.model.tilt_max)
-        hfov = self.pose.hfov
-        if self._zoom:
-            hfov = hfov_after_factor(hfov, math.exp(self._zoom * self.zoom_log_rate * dt))
+        hfov = pose.hfov
+        if zoom:
+            hfov = hfov_after_factor(hfov, math.exp(zoom * self.zoom_log_rate * dt))
             # the lens stops at its ends; an estimate that went on would rescale the
             # tracker's box every frame for a zoom that is not happening (the real-time
             # soak's boxes shrank to 0.1 px while the dome, at its widest, was "widening")
             hfov = min(max(hfov, self.model.hfov_tele), self.model.hfov_wide)
-        self.pose = Pose(pan, tilt, hfov)
-        return self.pose
+        return Pose(pan, tilt, hfov)
