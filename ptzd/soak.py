@@ -41,7 +41,7 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -440,6 +440,69 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
     return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
 
 
+# command -> first frame showing it, through sim-camera's TCP serial, its renderer, MJPEG
+# and FFmpeg: median of `python -m bench.frame_latency` (0.115-0.121 s on the 2-core box)
+SIM_CAMERA_LATENCY_S = 0.12
+SETTLE_FRAMES = 75  # 3 s at the scene's 25 fps: the dome turns to a new selection first
+
+
+def selection_centring(
+    lines: Iterable[str], selections: Sequence[Mapping[str, Any]], settle_frames: int
+) -> dict[str, Any]:
+    """How the daemon kept each operator-selected walker, from the simulator's ground truth
+    (`groundtruth_view.jsonl` lines), as the closed-loop issue measures it: the share of
+    frames with the walker's centre in the central cell of the 3x3 grid, and in view.
+
+    Counted from `settle_frames` after each selection until the next one, over the frames
+    in which the walker is in the scene at all (a walker who has walked out of the wide
+    image is nobody's to centre; one the dome lost sight of counts against it)."""
+    marks = sorted((int(s["frame"]), str(s["walker"])) for s in selections)
+    per: dict[int, dict[str, Any]] = {}
+    errors_x: list[float] = []
+    errors_y: list[float] = []
+    for line in lines:
+        try:
+            record = json.loads(line)
+            frame, boxes = int(record["frame"]), record["boxes"]
+        except (ValueError, KeyError, TypeError):
+            continue
+        active = [(f, w) for f, w in marks if f + settle_frames <= frame]
+        if not active:
+            continue
+        selected_at, walker = active[-1]
+        if walker not in boxes:
+            continue
+        entry = per.setdefault(
+            selected_at, {"frame": selected_at, "walker": walker, "frames": 0, "in_view": 0,
+                          "centred": 0}
+        )  # fmt: skip
+        entry["frames"] += 1
+        box = boxes[walker]
+        if box is None:
+            continue
+        entry["in_view"] += 1
+        ex = (box[0] + box[2] / 2 - 320) / 320
+        ey = (box[1] + box[3] / 2 - 240) / 240
+        errors_x.append(abs(ex))
+        errors_y.append(abs(ey))
+        if abs(ex) < 1 / 3 and abs(ey) < 1 / 3:
+            entry["centred"] += 1
+    frames = sum(e["frames"] for e in per.values())
+    for entry in per.values():
+        n = max(1, entry["frames"])
+        entry["in_view"] = round(entry["in_view"] / n, 3)
+        entry["centred"] = round(entry["centred"] / n, 3)
+    weighted = [(e["frames"], e["in_view"], e["centred"]) for e in per.values()]
+    return {
+        "frames": frames,
+        "in_view": round(sum(n * v for n, v, _ in weighted) / frames, 3) if frames else None,
+        "centred": round(sum(n * c for n, _, c in weighted) / frames, 3) if frames else None,
+        "median_abs_ex": _round(statistics.median(errors_x), 3) if errors_x else None,
+        "median_abs_ey": _round(statistics.median(errors_y), 3) if errors_y else None,
+        "selections": list(per.values()),
+    }
+
+
 # --- the real-time soak ---------------------------------------------------------------------
 
 
@@ -458,7 +521,7 @@ class Soak:
     def _config_text(self, http_url: str, serial_port: int, mqtt_port: int) -> str:
         return (
             f'[camera]\nname = "{CAMERA}"\n[logging]\nformat = "json"\n'
-            f'[capture]\nsource = "{http_url}"\n'
+            f'[capture]\nsource = "{http_url}"\nlatency_s = {SIM_CAMERA_LATENCY_S}\n'
             f'[serial]\nport = "socket://127.0.0.1:{serial_port}"\nreconnect_max_s = 1.0\n'
             f'[mqtt]\nenabled = true\nurl = "mqtt://127.0.0.1:{mqtt_port}"\n'
             "reconnect_max_s = 1.0\n"
@@ -676,35 +739,11 @@ class Soak:
                 )
 
     def _centring(self) -> dict[str, Any]:
-        """How far the selected walker's centre stayed from the view centre (ground truth),
-        as a fraction of the half-width/height, from 3 s after each selection."""
         path = self.dir / "sim" / "groundtruth_view.jsonl"
         if not self.selections or not path.exists():
             return {}
-        errors_x: list[float] = []
-        errors_y: list[float] = []
-        seen = total = 0
-        marks = [(s["frame"], s["walker"]) for s in self.selections]
         with path.open(encoding="utf-8") as lines:
-            for line in lines:
-                with contextlib.suppress(ValueError):
-                    rec = json.loads(line)
-                    active = [w for f, w in marks if f + 75 <= rec["frame"]]  # 3 s at 25 fps
-                    if not active:
-                        continue
-                    total += 1
-                    box = rec["boxes"].get(active[-1])
-                    if box is None:
-                        continue
-                    seen += 1
-                    errors_x.append(abs(box[0] + box[2] / 2 - 320) / 320)
-                    errors_y.append(abs(box[1] + box[3] / 2 - 240) / 240)
-        return {
-            "frames": total,
-            "target_visible": round(seen / total, 3) if total else None,
-            "median_abs_ex": _round(statistics.median(errors_x), 3) if errors_x else None,
-            "median_abs_ey": _round(statistics.median(errors_y), 3) if errors_y else None,
-        }
+            return selection_centring(lines, self.selections, SETTLE_FRAMES)
 
     @staticmethod
     def _first_after(times: list[tuple[float, int]], after: float, frames: int) -> float | None:

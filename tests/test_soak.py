@@ -28,6 +28,7 @@ from ptzd.soak import (
     draw_plots,
     proc_sample,
     rss_trend,
+    selection_centring,
     virtual_report,
 )
 
@@ -191,3 +192,26 @@ def test_virtual_soak_checks_catch_growth_and_leaks(tmp_path: Path) -> None:
     ]
     (tmp_path / "sim.log").write_text("Traceback (most recent call last):\n")
     assert not virtual_report(options, samples(181.0, 11, 12), 0, 200.0)["ok"]
+
+
+def test_selection_centring_counts_only_while_the_walker_is_in_the_scene() -> None:
+    """Per selection: after the settle time, the frames in which the walker is in the scene
+    at all; in view and centred (central cell of the 3x3 grid) are shares of those."""
+    centre, edge = [300.0, 200.0, 40.0, 80.0], [560.0, 200.0, 40.0, 80.0]  # cx 320 / 580
+
+    def line(frame: int, boxes: dict[str, list[float] | None]) -> str:
+        return json.dumps({"t": frame / 25, "frame": frame, "boxes": boxes})
+
+    lines = [line(f, {"1": centre}) for f in range(10)]  # settling: not counted
+    lines += [line(f, {"1": centre}) for f in range(10, 16)]  # 6 centred
+    lines += [line(f, {"1": edge}) for f in range(16, 18)]  # 2 in view, off-centre
+    lines += [line(f, {"1": None}) for f in range(18, 20)]  # 2 lost from view
+    lines += [line(f, {"2": centre}) for f in range(20, 30)]  # walker 1 left the scene
+    lines += ["not json", json.dumps({"frame": 31})]  # skipped, not fatal
+    lines += [line(f, {"2": None}) for f in range(40, 55)]  # walker 2 selected at 35
+    selections: list[dict[str, object]] = [{"frame": 0, "walker": 1}, {"frame": 35, "walker": "2"}]
+    result = selection_centring(lines, selections, 10)
+    first, second = result["selections"]
+    assert (first["frames"], first["in_view"], first["centred"]) == (10, 0.8, 0.6)
+    assert (second["frames"], second["in_view"], second["centred"]) == (10, 0.0, 0.0)
+    assert (result["frames"], result["in_view"], result["centred"]) == (20, 0.4, 0.3)
