@@ -374,15 +374,33 @@ def _last_probe(path: Path) -> dict[str, Any]:
     return {}
 
 
-def _last_json_line(path: Path) -> dict[str, Any] | None:
-    """The last complete JSON line of a file another process is appending to."""
+def _last_json_lines(path: Path, count: int) -> list[dict[str, Any]]:
+    """The last `count` complete JSON lines (oldest first) of a file another process is
+    appending to (fewer if it has fewer)."""
+    found: list[dict[str, Any]] = []
     with contextlib.suppress(OSError), path.open("rb") as f:
-        f.seek(max(0, f.seek(0, os.SEEK_END) - 8192))
+        f.seek(max(0, f.seek(0, os.SEEK_END) - 8192 * count))
         for raw in reversed(f.read().splitlines()):
             with contextlib.suppress(ValueError):
-                value: dict[str, Any] = json.loads(raw)
-                return value
-    return None
+                found.append(json.loads(raw))
+                if len(found) == count:
+                    break
+    return found[::-1]
+
+
+def _last_json_line(path: Path) -> dict[str, Any] | None:
+    """The last complete JSON line of a file another process is appending to."""
+    lines = _last_json_lines(path, 1)
+    return lines[0] if lines else None
+
+
+def dome_still(poses: Sequence[Mapping[str, Any]], frames: int) -> bool:
+    """Whether the last `frames` rendered frames (camera.jsonl records) share one pose."""
+    if len(poses) < frames:
+        return False
+    keys = ("pan", "tilt", "hfov")
+    first = tuple(poses[-frames][k] for k in keys)
+    return all(tuple(p[k] for k in keys) == first for p in poses[-frames:])
 
 
 def _probe_lags(path: Path) -> list[float]:
@@ -443,6 +461,8 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
 # command -> first frame showing it, through sim-camera's TCP serial, its renderer, MJPEG
 # and FFmpeg: median of `python -m bench.frame_latency` (0.115-0.121 s on the 2-core box)
 SIM_CAMERA_LATENCY_S = 0.12
+STILL_FRAMES = 5  # the operator selects on a picture that has stood still this long
+STILL_WAIT_S = 10.0
 SETTLE_FRAMES = 75  # 3 s at the scene's 25 fps: the dome turns to a new selection first
 
 
@@ -718,9 +738,22 @@ class Soak:
 
     async def _select(self, mqtt_port: int) -> None:
         """Pick the biggest walker well inside the view (ground truth of the sim's latest
-        frame) and send `{"select": box}` over MQTT, as an operator would."""
+        frame) and send `{"select": box}` over MQTT, as an operator would.
+
+        Only once the dome has stood still for `STILL_FRAMES` frames (or after
+        `STILL_WAIT_S`): the box is from the simulator's newest frame and the daemon applies
+        it to the frame it has, about `SIM_CAMERA_LATENCY_S` older. With the dome turning
+        at 15-20 deg/s, as it was at every first selection, that put the box 20 px beside
+        a 19 px wide walker, and the tracker started on the grass."""
         import aiomqtt
 
+        camera = self.dir / "sim" / "camera.jsonl"
+        waited = 0.0
+        while waited < STILL_WAIT_S and not dome_still(
+            _last_json_lines(camera, STILL_FRAMES), STILL_FRAMES
+        ):
+            await asyncio.sleep(0.1)
+            waited += 0.1
         record = _last_json_line(self.dir / "sim" / "groundtruth_view.jsonl")
         boxes = {
             walker: box
@@ -735,8 +768,9 @@ class Soak:
                 payload = json.dumps({"select": [round(v, 1) for v in box]})
                 await client.publish(f"ptzd/{CAMERA}/ptz", payload.encode(), qos=1)
                 self.selections.append(
-                    {"t": round(self.now(), 2), "frame": record["frame"], "walker": walker}
-                )
+                    {"t": round(self.now(), 2), "frame": record["frame"], "walker": walker,
+                     "waited_s": round(waited, 1)}
+                )  # fmt: skip
 
     def _centring(self) -> dict[str, Any]:
         path = self.dir / "sim" / "groundtruth_view.jsonl"

@@ -25,6 +25,7 @@ from ptzd.soak import (
     FAULTS,
     SoakOptions,
     _probe_loop,
+    dome_still,
     draw_plots,
     proc_sample,
     rss_trend,
@@ -215,3 +216,12 @@ def test_selection_centring_counts_only_while_the_walker_is_in_the_scene() -> No
     assert (first["frames"], first["in_view"], first["centred"]) == (10, 0.8, 0.6)
     assert (second["frames"], second["in_view"], second["centred"]) == (10, 0.0, 0.0)
     assert (result["frames"], result["in_view"], result["centred"]) == (20, 0.4, 0.3)
+
+
+def test_dome_still_needs_the_same_pose_over_the_last_frames() -> None:
+    pose = {"pan": 1.0, "tilt": -2.0, "hfov": 40.0}
+    turning = [{**pose, "pan": 1.0 + 0.5 * i} for i in range(5)]
+    assert dome_still([*turning, pose, pose, pose], 3)
+    assert not dome_still([*turning, pose, pose, pose], 4)  # the pan changed 4 frames ago
+    assert not dome_still([pose, pose], 3)  # too few frames to tell
+    assert not dome_still([pose, pose, {**pose, "hfov": 39.0}], 3)  # zooming is moving
