@@ -145,8 +145,12 @@ class SimFrameSource:
     `run()` must be running alongside.
     """
 
-    def __init__(self, camera: SimCamera) -> None:
+    def __init__(
+        self, camera: SimCamera, *, report_pose: bool = True, latency_s: float = 0.0
+    ) -> None:
         self.camera = camera
+        self.report_pose = report_pose  # False: as a dome that reports no pose
+        self.latency_s = latency_s  # as in VideoCaptureSource
         self._latest: tuple[SimFrame, float] | None = None
         self._ready = asyncio.Event()
         camera.listeners.append(self._put)
@@ -163,7 +167,9 @@ class SimFrameSource:
                 latest, self._latest = self._latest, None
                 if latest is not None:
                     frame, wall = latest
-                    yield FrameItem(frame.image, frame.t, frame.index, frame.pose, wall)
+                    pose = frame.pose if self.report_pose else None
+                    taken = frame.t - self.latency_s
+                    yield FrameItem(frame.image, taken, frame.index, pose, wall)
         finally:
             if self._put in self.camera.listeners:
                 self.camera.listeners.remove(self._put)

@@ -389,7 +389,9 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
             rendered.append(_Rendered(f.t - camera.epoch, f.video_frame, f.pose, f.index))
 
     camera.listeners.append(on_rendered)
-    frame_source = SimFrameSource(camera)
+    frame_source = SimFrameSource(
+        camera, report_pose=sim_cfg.report_pose, latency_s=config.capture.latency_s
+    )
     pty = PtyEndpoint(camera.link, clock)
     track_stream: TextIO | None = None
     try:

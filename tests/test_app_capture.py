@@ -79,3 +79,27 @@ def test_source_kinds() -> None:
     assert parse_source("/dev/video2") == "/dev/video2"
     assert is_live("rtsp://cam/stream") and is_live("http://cam/video.mjpg") and is_live("1")
     assert not is_live("/data/vtest.avi")
+
+
+async def test_sim_frames_can_come_without_their_pose() -> None:
+    """`[sim] report_pose = false`: the daemon gets the simulator's frames as from a dome
+    that reports nothing, and stamps them `latency_s` before they were rendered."""
+    from types import SimpleNamespace
+
+    from ptzd.capture import SimFrameSource
+    from ptzd.sim.camera_model import Pose
+
+    def rendered(camera: SimpleNamespace, t: float) -> None:
+        frame = SimpleNamespace(image=np.zeros((4, 4, 3), np.uint8), t=t, index=0,
+                                pose=Pose(1.0, 2.0, 30.0))  # fmt: skip
+        for listener in camera.listeners:
+            listener(frame)
+
+    for report_pose, latency, pose in ((True, 0.0, Pose(1.0, 2.0, 30.0)), (False, 0.1, None)):
+        camera = SimpleNamespace(listeners=[])
+        source = SimFrameSource(camera, report_pose=report_pose, latency_s=latency)  # type: ignore[arg-type]
+        frames = source.frames()
+        rendered(camera, 5.0)
+        item = await anext(frames)
+        assert item.pose == pose and item.capture_time == pytest.approx(5.0 - latency)
+        await frames.aclose()  # type: ignore[attr-defined]

@@ -68,6 +68,26 @@ async def test_virtual_closed_loop_keeps_the_walker_centred_and_is_deterministic
 
 
 @pytest.mark.slow
+async def test_closed_loop_as_a_dome_that_reports_no_pose(tmp_path: Path) -> None:
+    """`[sim] report_pose = false`: the daemon dead-reckons the pose from its own commands,
+    as with a real Pelco-P dome, and still keeps the walker centred."""
+    report = await run_closed_loop(
+        ClosedLoopOptions(
+            config=validate_config({"sim": {"report_pose": False}}, environ={}),
+            spec="synthetic:0",
+            duration=4.0,
+            record=tmp_path,
+            virtual=True,
+        )
+    )
+    assert report["in_view_fraction"] == 1.0
+    centred = report["centred_fraction"]
+    assert isinstance(centred, float) and centred >= 0.9
+    pans = {json.loads(line)["pan"] for line in (tmp_path / "camera.jsonl").open()}
+    assert len(pans) > 1  # the dome was driven
+
+
+@pytest.mark.slow
 async def test_unattended_daemon_finds_the_walker_by_itself_within_a_second(
     tmp_path: Path,
 ) -> None:

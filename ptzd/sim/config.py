@@ -53,6 +53,10 @@ class SimConfig(StrictModel):
 
     # MJPEG stream
     jpeg_quality: int = Field(default=85, ge=10, le=100)
+    # in-process (`ptzd sim`): whether the daemon gets each frame's pose with it, as from a
+    # dome that reports its position; false: as from a Pelco-P dome that reports nothing,
+    # the daemon dead-reckons the pose from its commands (capture.latency_s applies)
+    report_pose: bool = True
 
     @model_validator(mode="after")
     def _check_ranges(self) -> SimConfig:
