@@ -565,6 +565,12 @@ async def _drive(camera: Any, daemon: Any, clock: Any, duration: float) -> None:
 # --- report ---------------------------------------------------------------------------------
 
 
+def in_central_cell(u: float, v: float, width: int, height: int) -> bool:
+    """Whether view pixel (u, v) is in the central cell of the view's 3x3 grid: what the
+    closed-loop issue calls centred."""
+    return abs(u - width / 2) <= width / 6 and abs(v - height / 2) <= height / 6
+
+
 def build_report(
     *,
     rendered: Sequence[_Rendered],
@@ -591,9 +597,7 @@ def build_report(
         u, v = (float(c) for c in model.wide_to_view([[x + w / 2, y + h / 2]], frame.pose)[0])
         scored += 1
         ok_view = math.isfinite(u) and 0 <= u < width and 0 <= v < height
-        ok_centre = (
-            ok_view and abs(u - width / 2) <= width / 6 and abs(v - height / 2) <= height / 6
-        )
+        ok_centre = ok_view and in_central_cell(u, v, width, height)
         in_view += ok_view
         centred += ok_centre
         view_box = model.box_to_view(box, frame.pose)

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from ptzd.closed_loop import in_central_cell
 from ptzd.errors import UsageError
 from ptzd.pelco.codec import FrameParser, Motion
 
@@ -440,6 +441,19 @@ async def _drain(stream: asyncio.StreamReader | None, sink: IO[bytes]) -> None:
         sink.flush()
 
 
+def rss_summary(rss: Sequence[float]) -> dict[str, float | None]:
+    """The report's RSS fields from the samples after warm-up (see `rss_trend`)."""
+    trend = rss_trend(rss)
+    if trend is None:
+        return {"rss_mb_after_warmup": None, "rss_mb_end": None, "rss_growth_mb": None}
+    start, end = trend
+    return {
+        "rss_mb_after_warmup": round(start, 2),
+        "rss_mb_end": round(end, 2),
+        "rss_growth_mb": round(end - start, 2),
+    }
+
+
 def rss_trend(rss: Sequence[float]) -> tuple[float, float] | None:
     """(start, end) RSS of the samples after warm-up: the medians of their first and their
     last quarter. A leak is a trend; the heap breathes by a few MB from one sample to the
@@ -463,6 +477,7 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
 SIM_CAMERA_LATENCY_S = 0.12
 STILL_FRAMES = 5  # the operator selects on a picture that has stood still this long
 STILL_WAIT_S = 10.0
+VIEW = (640, 480)  # the sim-camera's view size ([sim] defaults)
 SETTLE_FRAMES = 75  # 3 s at the scene's 25 fps: the dome turns to a new selection first
 
 
@@ -501,12 +516,10 @@ def selection_centring(
         if box is None:
             continue
         entry["in_view"] += 1
-        ex = (box[0] + box[2] / 2 - 320) / 320
-        ey = (box[1] + box[3] / 2 - 240) / 240
-        errors_x.append(abs(ex))
-        errors_y.append(abs(ey))
-        if abs(ex) < 1 / 3 and abs(ey) < 1 / 3:
-            entry["centred"] += 1
+        cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+        errors_x.append(abs(cx - VIEW[0] / 2) / (VIEW[0] / 2))
+        errors_y.append(abs(cy - VIEW[1] / 2) / (VIEW[1] / 2))
+        entry["centred"] += in_central_cell(cx, cy, *VIEW)
     frames = sum(e["frames"] for e in per.values())
     for entry in per.values():
         n = max(1, entry["frames"])
@@ -815,15 +828,13 @@ class Soak:
             if '"level": "error"' in line or '"level": "critical"' in line
         ]  # fmt: skip
         elapsed = self.samples[-1]["t"] if self.samples else 0.0
-        trend = rss_trend(rss)
-        growth = round(trend[1] - trend[0], 2) if trend else None
+        memory = rss_summary(rss)
+        growth = memory["rss_growth_mb"]
         gaps = [b - a for a, b in zip(notify.pings, notify.pings[1:], strict=False)]
         summary = {
             "duration_s": round(elapsed, 1),
             "daemon_exit_code": exit_code,
-            "rss_mb_after_warmup": round(trend[0], 2) if trend else None,
-            "rss_mb_end": round(trend[1], 2) if trend else None,
-            "rss_growth_mb": growth,
+            **memory,
             "fds_min_max": [min(fds), max(fds)] if fds else None,
             "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
             "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
@@ -942,17 +953,15 @@ def virtual_report(
         frames = int(sim_report.get("frames_processed", 0))
     except (OSError, ValueError):
         simulated, frames = 0.0, 0
-    trend = rss_trend(rss)
-    growth = round(trend[1] - trend[0], 2) if trend else None
+    memory = rss_summary(rss)
+    growth = memory["rss_growth_mb"]
     summary = {
         "asked_s": options.minutes * 60,
         "simulated_s": simulated,
         "frames_processed": frames,
         "wall_s": wall_s,
         "exit_code": exit_code,
-        "rss_mb_after_warmup": round(trend[0], 2) if trend else None,
-        "rss_mb_end": round(trend[1], 2) if trend else None,
-        "rss_growth_mb": growth,
+        **memory,
         "fds_min_max": [min(fds), max(fds)] if fds else None,
         "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
         "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
