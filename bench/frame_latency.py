@@ -29,6 +29,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -67,13 +68,14 @@ def sim_camera() -> Iterator[tuple[str, str]]:
 
 
 class Frames:
-    """Grey frames of `source` with their arrival times (perf_counter), read in a thread."""
+    """Grey frames of `source` with their arrival times (perf_counter), read in a thread;
+    the last `keep` only (a trial needs a few seconds, not every frame of the run)."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(self, source: str, keep: int = 250) -> None:
         self.capture = cv2.VideoCapture(source)
         if not self.capture.isOpened():
             raise RuntimeError(f"cannot open {source}")
-        self.items: list[tuple[float, np.ndarray]] = []
+        self.items: deque[tuple[float, np.ndarray]] = deque(maxlen=keep)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._read, name="frames", daemon=True)
         self._thread.start()
@@ -83,8 +85,7 @@ class Frames:
             ok, image = self.capture.read()
             if not ok:
                 return
-            grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float32)
-            self.items.append((time.perf_counter(), grey))
+            self.items.append((time.perf_counter(), cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)))
 
     def close(self) -> None:
         self._stop.set()
@@ -95,7 +96,7 @@ class Frames:
 def onset(frames: list[tuple[float, np.ndarray]], sent: float, shift_px: float) -> float | None:
     """Seconds from `sent` to the arrival of the first frame shifted against the one before."""
     for (_, before), (arrived, after) in itertools.pairwise(frames):
-        (dx, dy), _ = cv2.phaseCorrelate(before, after)
+        (dx, dy), _ = cv2.phaseCorrelate(before.astype(np.float32), after.astype(np.float32))
         if arrived > sent and np.hypot(dx, dy) > shift_px:
             return arrived - sent
     return None
@@ -111,14 +112,16 @@ def measure(source: str, port: str, args: argparse.Namespace) -> dict[str, objec
         link.write(stop)
         time.sleep(args.settle_s)
         for trial in range(args.trials):
-            first = len(frames.items) - 1
             speed = args.speed if trial % 2 == 0 else -args.speed
             link.write(encode(Motion(pan=speed), protocol=protocol, address=args.address))
             link.flush()
             sent = time.perf_counter()
             time.sleep(args.move_s)
             link.write(stop)
-            seen = frames.items[max(0, first) :]
+            # from the last frame before the command on (the reference for the first shift)
+            items = list(frames.items)
+            before = [i for i, (t, _) in enumerate(items) if t <= sent]
+            seen = items[before[-1] if before else 0 :]
             period = statistics.median(np.diff([t for t, _ in seen])) if len(seen) > 2 else None
             latency = onset(seen, sent, args.shift_px)
             trials.append({"latency_s": latency, "frame_period_s": period})
