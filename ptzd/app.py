@@ -366,14 +366,17 @@ class Daemon:
         return self.estimate.pose_at(frame.capture_time)
 
     async def _vision(self) -> None:
-        tracker: Tracker | None = None
+        tracker: Tracker | None = None  # following a target: `own`; none: None
         generation = self._generation
         previous: tuple[FrameItem, Pose] | None = None
-        # build the first tracker before the first frame (imports, allocations): the frame
-        # the initial box was drawn on must not be dropped while we get ready
-        spare: Tracker | None = None
+        # One tracker for the camera, initialised again on every new target rather than
+        # built anew: a tracker's frame-sized buffers (its motion map: megabytes at 640x480)
+        # allocated per lock, a lock every few seconds for months, fragment the heap.
+        # The first is built before the first frame (imports, allocations) when there is an
+        # initial box: the frame it was drawn on must not be dropped while we get ready.
+        own: Tracker | None = None
         if self._pending_box is not None:
-            spare = await self._blocking(self.tracker_factory)
+            own = await self._blocking(self.tracker_factory)
         self.ready.set()
         try:
             while True:
@@ -400,8 +403,7 @@ class Daemon:
                 if self._pending_box is not None:
                     box, self._pending_box = self._pending_box, None
                     generation = self._generation
-                    tracker = spare if spare is not None else self.tracker_factory()
-                    spare = None
+                    tracker = own = own or self.tracker_factory()
                     await self._blocking(tracker.init, frame.image, box)
                     decision: Decision | None = None
                     if self.acquirer is not None:
@@ -425,7 +427,7 @@ class Daemon:
                     )
                     if decision.lock_box is not None:  # a new target, or the old one re-found
                         box = decision.lock_box
-                        tracker = self.tracker_factory()
+                        tracker = own = own or self.tracker_factory()
                         await self._blocking(tracker.init, frame.image, box)
                         result = TrackResult(box, TrackState.TRACKING, 1.0, (0.0, 0.0))
                         if not _reidentified(decision):  # same person: same id, same size

@@ -282,16 +282,22 @@ class RedBlobDetector:
 
 @contextlib.asynccontextmanager
 async def acquiring_daemon(
-    speed: float, detector: RedBlobDetector, log: ItemLog
+    speed: float, detector: RedBlobDetector, log: ItemLog, built: list[Tracker] | None = None
 ) -> AsyncIterator[tuple[Daemon, int]]:
-    """A running daemon with no initial box and a detector; stopped in order on exit."""
+    """A running daemon with no initial box and a detector; stopped in order on exit.
+    The trackers it builds are appended to `built`."""
     clock = RealClock()
+    trackers = [] if built is None else built
+
+    def build() -> Tracker:
+        trackers.append(make_tracker(cfg.tracker))
+        return trackers[-1]
+
     with pty_pair() as (master, port):
         cfg = config(port)
         async with PelcoLink(cfg.serial, clock=clock) as link:
             daemon = Daemon(cfg, source=MovingTarget(clock, speed=speed), link=link, clock=clock,
-                            tracker_factory=lambda: make_tracker(cfg.tracker),
-                            detector=detector, observer=log)  # fmt: skip
+                            tracker_factory=build, detector=detector, observer=log)  # fmt: skip
             task = asyncio.create_task(daemon.run())
             yield daemon, master
             daemon.request_stop()
@@ -304,7 +310,8 @@ async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() 
     detector = RedBlobDetector()
     log = ItemLog()
     items = log.items
-    async with acquiring_daemon(4.0, detector, log) as (daemon, master):
+    built: list[Tracker] = []
+    async with acquiring_daemon(4.0, detector, log, built) as (daemon, master):
         await asyncio.sleep(1.0)
         found = read_motions(master)
         daemon.handle_command(SetAutotrack(False))
@@ -329,6 +336,7 @@ async def test_daemon_acquires_by_itself_and_autotrack_off_pauses_acquisition() 
     # autotrack ON again: acquisition starts afresh (detector reset) and follows again
     assert detector.resets >= 1
     assert reasons.count("acquired") >= 2
+    assert len(built) == 1  # one tracker for the camera, initialised again on each lock
     assert any(m.pan > 0 for m in resumed)
 
 

@@ -49,7 +49,10 @@ class Tracker(Protocol):
     """A single-target tracker."""
 
     def init(self, frame: NDArray[np.uint8], box: Box) -> None:
-        """Start tracking the target inside `box` of `frame` (BGR, HxWx3)."""
+        """Start tracking the target inside `box` of `frame` (BGR, HxWx3).
+
+        It starts over: a tracker initialised again on a new target behaves exactly as a new
+        tracker would (the daemon keeps one per camera, so its buffers are allocated once)."""
         ...
 
     def update(
