@@ -49,7 +49,12 @@ def add_arguments(parser: Any) -> None:
     )
     parser.add_argument("--wide-hfov", type=float, metavar="DEG", help="override sim.wide_hfov")
     parser.add_argument("--gt", metavar="GT.json", help="ground truth of the wide video")
-    parser.add_argument("--target", type=int, metavar="ID", help="ground-truth track to follow")
+    parser.add_argument(
+        "--target",
+        type=int,
+        metavar="ID",
+        help="ground-truth track to follow (a synthetic scene's walker needs no --gt)",
+    )
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     parser.add_argument("--record", metavar="DIR", help="write jsonl records and the report")
     parser.add_argument(
@@ -131,8 +136,8 @@ class ClosedLoopOptions:
         except ValidationError as exc:
             problem = exc.errors(include_url=False)[0]
             raise UsageError(f"--mqtt-url/--camera-name: {problem['msg']}") from None
-        if (args.gt is None) != (args.target is None):
-            raise UsageError("--gt and --target go together")
+        if args.gt is not None and args.target is None:
+            raise UsageError("--gt needs --target ID (the track to follow)")
         if args.video and args.gt is None:
             raise UsageError("--video needs --gt GT.json --target ID (the target to follow)")
         if getattr(args, "loop", False) and not (getattr(args, "acquire", False) and args.duration):
@@ -509,7 +514,7 @@ def write_view(
             cell = ((width // 3, height // 3), (2 * width // 3, 2 * height // 3))
             cv2.rectangle(view, *cell, (160, 160, 160), 1)
             track = by_frame.get(frame.index, track)  # a skipped frame shows the last track
-            if track is not None:
+            if track is not None and track["box"] is not None:  # None: no target (searching)
                 x, y, w, h = (round(v) for v in track["box"])
                 colour = _STATE_COLOURS.get(track["state"], (255, 0, 0))
                 cv2.rectangle(view, (x, y), (x + w, y + h), colour, 2)
