@@ -352,7 +352,7 @@ class NotifySocket:
 
 def proc_sample(pid: int) -> dict[str, float]:
     """RSS (MB), its anonymous part (the heap, where a leak would show; the rest is pages
-    of mapped files such as the libraries) and open file descriptors, from /proc."""
+    of mapped files such as the libraries), and open file descriptors, from /proc."""
     rss_kb = anon_kb = 0
     with contextlib.suppress(OSError):
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
@@ -827,6 +827,7 @@ class Soak:
         opts = self.options
         warm = [s for s in self.samples if s["t"] >= min(opts.warmup_s, opts.minutes * 30)]
         fds = [s["fds"] for s in warm if s["fds"] >= 0]
+        threads = [s["threads"] for s in warm if s.get("threads", -1) >= 0]
         tasks = [s["tasks"] for s in warm if s["tasks"] is not None]
         lags = [1000 * v for v in _probe_lags(probe)]
         log_text = (self.dir / "daemon.log").read_text(errors="replace")
@@ -843,6 +844,7 @@ class Soak:
             "daemon_exit_code": exit_code,
             **memory,
             "fds_min_max": [min(fds), max(fds)] if fds else None,
+            "threads_min_max": [min(threads), max(threads)] if threads else None,
             "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
             "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
             "loop_lag_ms_p99": _round(_percentile(lags, 0.99)),
@@ -949,6 +951,7 @@ def virtual_report(
     cut = min(max(options.warmup_s, 0.2 * wall_s), 0.5 * wall_s)
     warm = [s for s in samples if s["t"] >= cut] or samples
     fds = [s["fds"] for s in warm if s.get("fds", -1) >= 0]
+    threads = [s["threads"] for s in warm if s.get("threads", -1) >= 0]
     tasks = [s["tasks"] for s in warm if s.get("tasks") is not None]
     lags = [1000 * v for v in _probe_lags(out / "probe.jsonl")]
     log_text = (out / "sim.log").read_text(errors="replace")
@@ -969,6 +972,7 @@ def virtual_report(
         "exit_code": exit_code,
         **memory,
         "fds_min_max": [min(fds), max(fds)] if fds else None,
+        "threads_min_max": [min(threads), max(threads)] if threads else None,
         "tasks_min_max": [min(tasks), max(tasks)] if tasks else None,
         "loop_lag_ms_p50": _round(_percentile(lags, 0.5)),
         "loop_lag_ms_p99": _round(_percentile(lags, 0.99)),
