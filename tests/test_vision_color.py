@@ -182,3 +182,21 @@ def test_background_weights_of_a_vanishing_ring_share_are_one_without_warnings()
         weights = background_weights(ring)
     assert weights[1] == 1.0 and weights[2] == 1.0
     assert weights[0] < weights[3] < 1.0  # commoner around the target: counts less
+
+
+def test_part_similarities_tell_half_a_match_from_a_whole_one() -> None:
+    from tests.vision_helpers import background, draw_person
+
+    box = (100.0, 60.0, 30.0, 80.0)
+    centre = np.array([115.0, 100.0, 30.0, 80.0])
+    target = background(320, 240, 0)[:240, :320].copy()
+    draw_person(target, box, (40, 40, 200), (160, 60, 20))
+    impostor = background(320, 240, 0)[:240, :320].copy()
+    draw_person(impostor, box, (40, 160, 40), (160, 60, 20))  # same trousers, green top
+    likelihood = ColorLikelihood(ColorConfig(parts=2), GmmConfig())
+    likelihood.init(target, centre)
+    whole = likelihood.part_similarities(target, centre)
+    half = likelihood.part_similarities(impostor, centre)
+    np.testing.assert_allclose(whole, [1.0, 1.0])
+    assert half[0] < 0.5 < 0.9 < half[1]  # top to bottom
+    assert likelihood.similarity(impostor, centre) == pytest.approx(half.mean())

@@ -156,8 +156,8 @@ class _FlatLikelihood:
     def log_likelihood(self, frame, boxes):
         return np.zeros(len(boxes))
 
-    def similarity(self, frame, box):
-        return 1.0
+    def part_similarities(self, frame, box):
+        return np.ones(1)
 
     def adapt(self, frame, box):
         pass
@@ -254,8 +254,8 @@ class _EdgeLikelihood:
     def log_likelihood(self, frame, boxes):
         return 30.0 * self._score(frame, np.asarray(boxes, float))
 
-    def similarity(self, frame, box):
-        return float(self._score(frame, np.asarray(box, float)[None, :])[0])
+    def part_similarities(self, frame, box):
+        return self._score(frame, np.asarray(box, float)[None, :])
 
     def adapt(self, frame, box):
         pass
@@ -357,3 +357,39 @@ def test_resembles_tells_the_target_from_the_background(kind: str) -> None:
     x, y, w, h = scene.truth(11)
     assert tracker.resembles(frame, (x, y, w, h))
     assert not tracker.resembles(frame, (x + 120, y + 40, w, h))  # plain background
+
+
+def _impostor_frame(t: int, target_until: int, impostor_from: int, back_from: int) -> np.ndarray:
+    """The target (red top, blue trousers) walks right; it is gone from `target_until` and
+    back from `back_from`; meanwhile, from `impostor_from`, someone in the same trousers and
+    a green top walks on where it would be."""
+    from tests.vision_helpers import background, draw_person
+
+    img = background(320, 240, 0)[:240, :320].copy()
+    box = (60.0 + 2.0 * t, 80.0, 24.0, 60.0)
+    if t < target_until or t >= back_from:
+        draw_person(img, box, (40, 40, 200), (160, 60, 20))
+    elif t >= impostor_from:
+        draw_person(img, box, (40, 160, 40), (160, 60, 20))
+    return img
+
+
+@pytest.mark.parametrize("threshold", [0.5, 0.0])
+def test_only_a_match_in_every_part_ends_an_occlusion(threshold: float) -> None:
+    # (the impostor's mean of parts is 0.51-0.59: the mean's threshold is put under it)
+    occlusion = {"similarity_threshold": 0.5, "part_threshold": threshold}
+    config = TrackerConfig.model_validate({"occlusion": occlusion})
+    tracker = make_tracker(config)
+    tracker.init(_impostor_frame(0, 10, 13, 40), (60.0, 80.0, 24.0, 60.0))
+    states = [tracker.update(_impostor_frame(t, 10, 13, 40)).state for t in range(1, 50)]
+    assert set(states[:9]) == {TrackState.TRACKING}
+    assert states[9] is TrackState.OCCLUDED  # gone at t = 10
+    with_impostor = states[15:39]  # t = 16..39: the impostor alone
+    if threshold:
+        # its trousers match, its top does not: the target stays occluded, then lost ...
+        assert TrackState.TRACKING not in with_impostor
+        # ... and the target itself, back at t = 40, is found again
+        assert set(states[44:]) == {TrackState.TRACKING}
+    else:
+        # on the mean of the parts the impostor passes for the target
+        assert set(with_impostor) == {TrackState.TRACKING}

@@ -424,11 +424,18 @@ class ColorLikelihood:
             rho -= cfg.scale_contrast * ring_rho
         return -(1.0 - rho) / (2.0 * cfg.sigma * cfg.sigma)
 
-    def similarity(self, frame: Frame, box: FloatArray) -> float:
+    def part_similarities(self, frame: Frame, box: FloatArray) -> FloatArray:
         hist = self.histograms(frame, box[None, :])
         self._last = (frame, box.copy(), hist[0])
-        rho = float(bhattacharyya_sqrt(np.sqrt(hist), self._sqrt_model)[0])
-        return min(max(rho, 0.0), 1.0)
+        parts = self._config.parts
+        # per part: sum_u sqrt(p_u q_u); `_sqrt_model` carries a 1/parts factor (the mean)
+        terms = np.sqrt(hist[0]) * self._sqrt_model.reshape(parts, -1)
+        rho: FloatArray = np.clip(parts * terms.sum(axis=1), 0.0, 1.0)
+        return rho
+
+    def similarity(self, frame: Frame, box: FloatArray) -> float:
+        """The mean of `part_similarities`: the seed's rho (eq. 10), averaged over parts."""
+        return float(self.part_similarities(frame, box).mean())
 
     def adapt(self, frame: Frame, box: FloatArray) -> None:
         if self._gmm is None:

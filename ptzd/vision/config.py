@@ -112,6 +112,13 @@ class OcclusionConfig(StrictModel):
     # default) asks similarity_threshold only: 0.8 also turned away the target itself, seen
     # over a pillar by a partial detection (synthetic:6, centred 0.90 -> 0.18).
     match_share: float = Field(default=0.0, ge=0.0, le=1.0)
+    # Beyond the seed: an occluded or lost target is back only if every part of the colour
+    # model (`color.parts`, top to bottom) scores at least this at the tracker's box, not
+    # just their mean. Someone in the same trousers and another shirt scores 0.29-0.37 in
+    # the top part and passes the mean; the target itself 0.75-0.8 (synthetic:0, walker 6
+    # and the walker who comes out from behind the hedge). Not applied to a detection's
+    # box (`resembles`): looser, it scored the target's own top 0.41-0.48. 0: off.
+    part_threshold: float = Field(default=0.5, ge=0.0, le=1.0)
     # Hysteresis (beyond the seed): an occluded target is back only at `recover_share` of
     # what it usually scores. Off (0, the seed's single threshold) by default: 0.9 kept a
     # pillar's edge from passing for the target in synthetic:12, but held back walkers

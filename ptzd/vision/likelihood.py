@@ -25,8 +25,11 @@ class Likelihood(Protocol):
         """log p(frame | box) up to a constant, one per row of `boxes` (N x 4)."""
         ...
 
-    def similarity(self, frame: Frame, box: FloatArray) -> float:
-        """Similarity in 0..1 of the candidate at `box` to the target model (occlusion test)."""
+    def part_similarities(self, frame: Frame, box: FloatArray) -> FloatArray:
+        """Similarity in 0..1 of each part of the candidate at `box` (top to bottom; one
+        value for a model with no parts) to the target model. Their mean is the occlusion
+        test's similarity; their minimum says whether the whole candidate matches, not half
+        of it (a re-identification)."""
         ...
 
     def adapt(self, frame: Frame, box: FloatArray) -> None:
