@@ -34,6 +34,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import datetime  # noqa: E402
+import importlib.util  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -651,12 +652,17 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(results, trackers)
     if results:
         print_table(results, summary, trackers)
-        plot(summary, trackers, args.png)
-        print(f"\nwrote {args.png}")
+    # the results first: the plot needs matplotlib, which only the bench venv has
     args.out.parent.mkdir(parents=True, exist_ok=True)
     doc = {"meta": meta, "sequences": results, "classes": summary, "speed": speed}
     args.out.write_text(json.dumps(doc, indent=1, default=float) + "\n")
-    print(f"wrote {args.out}")
+    print(f"\nwrote {args.out}")
+    if results:
+        if importlib.util.find_spec("matplotlib") is None:
+            print(f"no plot ({args.png}): matplotlib is in the bench venv, not here")
+        else:
+            plot(summary, trackers, args.png)
+            print(f"wrote {args.png}")
     return 0
 
 
