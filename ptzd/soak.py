@@ -70,10 +70,13 @@ class SoakOptions:
     sample_s: float = 2.0
     warmup_s: float = 30.0
     fps: float | None = None  # the simulated dome's frame rate (`[sim] fps`); None: the scene's
+    max_heap_growth_mb: float = 5.0  # the leak check's limit on anonymous RSS growth
 
     def __post_init__(self) -> None:
         if not self.minutes > 0:
             raise UsageError(f"--minutes must be > 0; got {self.minutes}")
+        if not self.max_heap_growth_mb > 0:
+            raise UsageError(f"--max-heap-growth-mb must be > 0; got {self.max_heap_growth_mb}")
         if self.fps is not None and not 0 < self.fps <= 240:
             raise UsageError(f"--fps must be in (0, 240]; got {self.fps}")
         if self.fps is not None and not self.virtual_clock:
@@ -866,7 +869,7 @@ class Soak:
             "clean_exit": exit_code == 0,
             "dome_left_stopped": summary["last_motion_is_stop"],
             "no_unhandled_exception": not summary["unhandled_exception"],
-            "rss_anon_growth_below_5mb": growth is not None and growth < 5.0,
+            "heap_growth_below_limit": growth is not None and growth < opts.max_heap_growth_mb,
             "no_fd_leak": bool(fds) and max(fds) - min(fds) <= 8,
             "no_task_leak": bool(tasks) and max(tasks) - min(tasks) <= 8,
             "faults_recovered": all(f.get("recovered") for f in self.fault_log),
@@ -878,6 +881,7 @@ class Soak:
                 "virtual_clock": opts.virtual_clock,
                 "sample_s": opts.sample_s,
                 "warmup_s": opts.warmup_s,
+                "max_heap_growth_mb": opts.max_heap_growth_mb,
             },
             "summary": summary,
             "checks": checks,
@@ -983,12 +987,17 @@ def virtual_report(
         "clean_exit": exit_code == 0,
         "simulated_what_was_asked": simulated >= 0.99 * options.minutes * 60,
         "no_unhandled_exception": not summary["unhandled_exception"],
-        "rss_anon_growth_below_5mb": growth is not None and growth < 5.0,
+        "heap_growth_below_limit": growth is not None and growth < options.max_heap_growth_mb,
         "no_fd_leak": bool(fds) and max(fds) - min(fds) <= 8,
         "no_task_leak": bool(tasks) and max(tasks) - min(tasks) <= 8,
     }
     return {
-        "options": {"minutes": options.minutes, "virtual_clock": True, "fps": options.fps},
+        "options": {
+            "minutes": options.minutes,
+            "virtual_clock": True,
+            "fps": options.fps,
+            "max_heap_growth_mb": options.max_heap_growth_mb,
+        },
         "summary": summary,
         "checks": checks,
         "ok": all(checks.values()),

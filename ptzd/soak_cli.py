@@ -29,6 +29,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     parser.add_argument("--sample-s", type=float, default=2.0, help="sampling period (s)")
     parser.add_argument("--warmup-s", type=float, default=30.0,
                         help="RSS growth is measured from the first sample after this")  # fmt: skip
+    parser.add_argument("--max-heap-growth-mb", type=float, default=5.0, metavar="MB",
+                        help="the leak check: growth of anonymous RSS after warm-up "
+                        "below this (default 5)")  # fmt: skip
     parser.add_argument("--fps", type=float, default=None, metavar="FPS",
                         help="with --virtual-clock: the simulated dome's frame rate "
                         "([sim] fps; default: the scene's 25)")  # fmt: skip
@@ -47,6 +50,7 @@ def _soak(args: argparse.Namespace) -> int:
         sample_s=args.sample_s,
         warmup_s=args.warmup_s,
         fps=args.fps,
+        max_heap_growth_mb=args.max_heap_growth_mb,
     )
     report = run_soak(options)
     import json

@@ -146,7 +146,8 @@ def test_ci_soak_with_three_faults(tmp_path: Path) -> None:
     started = time.monotonic()
     run = subprocess.run(
         [sys.executable, "-m", "ptzd", "soak", "--minutes", str(CI_SOAK_MINUTES),
-         "--faults", ",".join(FAULTS), "--warmup-s", "120", "--report", str(tmp_path)],
+         "--faults", ",".join(FAULTS), "--warmup-s", "120", "--report", str(tmp_path),
+         "--max-heap-growth-mb", str(CI_HEAP_GROWTH_MB)],
         capture_output=True, text=True, timeout=195,
     )  # fmt: skip
     report = json.loads((tmp_path / "report.json").read_text())
@@ -157,12 +158,18 @@ def test_ci_soak_with_three_faults(tmp_path: Path) -> None:
     assert all(f["recovered"] for f in report["faults"])
     summary = report["summary"]
     assert summary["daemon_exit_code"] == 0 and summary["last_motion_is_stop"]
-    assert summary["rss_anon_growth_mb"] < 5.0
+    assert summary["rss_anon_growth_mb"] < CI_HEAP_GROWTH_MB
     assert summary["mqtt_messages"] > 100 and summary["frames"] > 500
     assert time.monotonic() - started < 195
 
 
 CI_SOAK_MINUTES = 3.0
+# The 5 MB goal is the 1-hour and 24-hour runs' (docs/reliability.md). In 3 minutes the window
+# after warm-up is 90 s, and there the live heap follows the scenario (the background model
+# is built while the dome stands and dropped when it moves; box-sized arrays follow the zoom):
+# 60.3..75.3 MB within one such window, growth -3.9..+4.1 MB over healthy runs. 10 MB still
+# fails a leak of 4 KB a frame.
+CI_HEAP_GROWTH_MB = 10.0
 
 
 def test_virtual_soak_checks_catch_growth_and_leaks(tmp_path: Path) -> None:
@@ -193,8 +200,13 @@ def test_virtual_soak_checks_catch_growth_and_leaks(tmp_path: Path) -> None:
     leaking = virtual_report(options, samples(190.0, 30, 40), 0, 200.0)
     checks = leaking["checks"]
     assert not leaking["ok"] and leaking["summary"]["rss_anon_growth_mb"] > 5.0
-    assert not checks["rss_anon_growth_below_5mb"] and not checks["no_fd_leak"]
+    assert not checks["heap_growth_below_limit"] and not checks["no_fd_leak"]
     assert not checks["no_task_leak"] and checks["clean_exit"]
+    looser = SoakOptions(minutes=10, report_dir=tmp_path, virtual_clock=True, warmup_s=30,
+                         max_heap_growth_mb=12.0)  # fmt: skip
+    assert virtual_report(looser, samples(190.0, 11, 12), 0, 200.0)["ok"]
+    with pytest.raises(UsageError, match="max-heap-growth-mb"):
+        SoakOptions(minutes=1, report_dir=tmp_path, max_heap_growth_mb=0.0)
     short = SoakOptions(minutes=20, report_dir=tmp_path, virtual_clock=True)
     assert not virtual_report(short, samples(181.0, 11, 12), 0, 200.0)["checks"][
         "simulated_what_was_asked"
