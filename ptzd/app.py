@@ -630,7 +630,7 @@ class Daemon:
             commands.append(motion)
             self._last_motion = motion
             self._last_sent = now
-            self.estimate.command(motion.pan, motion.tilt, int(motion.zoom))
+            self.estimate.command(motion.pan, motion.tilt, int(motion.zoom), now)
         wall = fresh.frame.wall_time if fresh is not None and fresh.frame.wall_time else None
         if commands:
             self._queue(tuple(commands), wall)
@@ -697,9 +697,11 @@ class Daemon:
         self._manual = True
         self._set_autotrack(False)
         if isinstance(manual, Motion):
+            now = self.clock.now()
             self._last_motion = manual
-            self._last_sent = self.clock.now()
-            self.estimate.command(manual.pan, manual.tilt, int(manual.zoom))
+            self._last_sent = now
+            # (between control ticks: the motion it replaces ran until now)
+            self.estimate.command(manual.pan, manual.tilt, int(manual.zoom), now)
         if not self.commands.closed:
             self._queue((manual,), None, "manual")
 

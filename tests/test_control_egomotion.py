@@ -79,6 +79,16 @@ def test_dome_estimate_dead_reckons_commands() -> None:
     assert estimate.advance(1.0) == pose
 
 
+def test_a_command_between_ticks_ends_the_motion_it_replaces_at_its_own_time() -> None:
+    """A manual command arrives between control ticks: the pan in force until then counts,
+    and the new motion starts at the command's time, not at the last tick's."""
+    estimate = DomeEstimate(DomeModelConfig(), zoom_log_rate=0.75, start=Pose(0.0, 0.0, 60.0))
+    estimate.command(63, 0, 0, time=0.0)  # 80 deg/s
+    estimate.command(0, 0, 0, time=0.5)  # no advance in between
+    assert estimate.advance_to(1.0).pan == pytest.approx(40.0)
+    assert estimate.pose_at(0.25).pan == pytest.approx(20.0)
+
+
 def test_dome_estimate_stops_where_the_dome_does() -> None:
     """A zoom held past the lens's end, or a tilt past its limit, moves the estimate no
     further than the dome: the tracker must not be told of a zoom that is not happening."""

@@ -119,8 +119,15 @@ class DomeEstimate:
     def _remember(self) -> None:
         self._history.append((self.time, self.pose, self._motion))
 
-    def command(self, pan_speed: int, tilt_speed: int, zoom: int) -> None:
-        """The motion now in force (Pelco signed speeds; zoom -1 out, 0, +1 in)."""
+    def command(
+        self, pan_speed: int, tilt_speed: int, zoom: int, time: float | None = None
+    ) -> None:
+        """The motion in force from `time` on (Pelco signed speeds; zoom -1 out, 0, +1 in).
+
+        The estimate is first advanced to `time` under the motion it replaces (None: it
+        starts at the estimate's own time, to which the caller has advanced it)."""
+        if time is not None:
+            self.advance_to(time)
         self._motion = (pan_speed, tilt_speed, zoom)
         self._remember()
 
