@@ -146,11 +146,17 @@ class SimFrameSource:
     """
 
     def __init__(
-        self, camera: SimCamera, *, report_pose: bool = True, latency_s: float = 0.0
+        self,
+        camera: SimCamera,
+        *,
+        report_pose: bool = True,
+        latency_s: float = 0.0,
+        jpeg_quality: int | None = None,
     ) -> None:
         self.camera = camera
         self.report_pose = report_pose  # False: as a dome that reports no pose
         self.latency_s = latency_s  # as in VideoCaptureSource
+        self.jpeg_quality = jpeg_quality  # set: each frame JPEG-coded, as an MJPEG camera's
         self._latest: tuple[SimFrame, float] | None = None
         self._ready = asyncio.Event()
         camera.listeners.append(self._put)
@@ -169,7 +175,12 @@ class SimFrameSource:
                     frame, wall = latest
                     pose = frame.pose if self.report_pose else None
                     taken = frame.t - self.latency_s
-                    yield FrameItem(frame.image, taken, frame.index, pose, wall)
+                    image = frame.image
+                    if self.jpeg_quality is not None:
+                        from ptzd.sim.mjpeg import jpeg_round_trip
+
+                        image = jpeg_round_trip(image, self.jpeg_quality)
+                    yield FrameItem(image, taken, frame.index, pose, wall)
         finally:
             if self._put in self.camera.listeners:
                 self.camera.listeners.remove(self._put)

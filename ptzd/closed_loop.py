@@ -21,7 +21,7 @@ import itertools
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -369,6 +369,9 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
     pose0 = pose_towards(
         CameraModel(source.size, sim_cfg.wide_hfov, view_size), frames[first], sim_cfg
     )
+    if sim_cfg.start_hfov is not None:
+        hfov = min(sim_cfg.zoom_hfov_wide, max(sim_cfg.zoom_hfov_tele, sim_cfg.start_hfov))
+        pose0 = replace(pose0, hfov=hfov)
     dome = Dome(
         sim_cfg,
         start_time=clock.now(),
@@ -395,7 +398,10 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
 
     camera.listeners.append(on_rendered)
     frame_source = SimFrameSource(
-        camera, report_pose=sim_cfg.report_pose, latency_s=config.capture.latency_s
+        camera,
+        report_pose=sim_cfg.report_pose,
+        latency_s=config.capture.latency_s,
+        jpeg_quality=sim_cfg.jpeg_quality if sim_cfg.compress_frames else None,
     )
     pty = PtyEndpoint(camera.link, clock)
     track_stream: TextIO | None = None

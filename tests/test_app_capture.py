@@ -103,3 +103,33 @@ async def test_sim_frames_can_come_without_their_pose() -> None:
         item = await anext(frames)
         assert item.pose == pose and item.capture_time == pytest.approx(5.0 - latency)
         await frames.aclose()  # type: ignore[attr-defined]
+
+
+async def test_sim_frames_can_come_jpeg_coded_as_from_the_mjpeg_camera() -> None:
+    """`[sim] compress_frames`: the daemon sees what the MJPEG stream would deliver: the
+    same size, the colours of small details bled into their surroundings (4:2:0 chroma)."""
+    from types import SimpleNamespace
+
+    import cv2
+
+    from ptzd.capture import SimFrameSource
+    from ptzd.sim.camera_model import Pose
+    from ptzd.sim.mjpeg import jpeg_round_trip
+
+    image = np.full((48, 64, 3), 128, np.uint8)
+    image[20:26, 30:33] = (40, 90, 230)  # a small orange patch on grey
+    camera = SimpleNamespace(listeners=[])
+    source = SimFrameSource(camera, jpeg_quality=85)  # type: ignore[arg-type]
+    frames = source.frames()
+    frame = SimpleNamespace(image=image, t=1.0, index=0, pose=Pose(0.0, 0.0, 60.0))
+    for listener in camera.listeners:
+        listener(frame)
+    item = await anext(frames)
+    await frames.aclose()  # type: ignore[attr-defined]
+    assert item.image.shape == image.shape and item.image.dtype == np.uint8
+    np.testing.assert_array_equal(item.image, jpeg_round_trip(image, 85))
+    saturation = cv2.cvtColor(item.image, cv2.COLOR_BGR2HSV)[20:26, 30:33, 1].mean()
+    original = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)[20:26, 30:33, 1].mean()
+    assert saturation < 0.9 * original  # the patch's colour washed out
+    grey = jpeg_round_trip(image[..., 0], 85)
+    assert grey.shape == (48, 64)

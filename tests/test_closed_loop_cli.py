@@ -65,3 +65,29 @@ def test_sim_follows_a_named_synthetic_walker_and_draws_searching_frames(tmp_pat
     count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
     capture.release()
     assert count == report["frames_rendered"] > 10
+
+
+def test_sim_can_start_at_the_widest_pointed_at_the_target(tmp_path: Path) -> None:
+    """`[sim] start_hfov`: the dome starts at that FOV (as the soak's does), still looking at
+    the target; by default the target is a third of the view high."""
+    config = tmp_path / "wide.toml"
+    config.write_text("[sim]\nstart_hfov = 60.0\n")
+
+    def first_view(*extra: str) -> tuple[dict[str, float], list[float]]:
+        rec = tmp_path / ("rec" + "".join(extra).replace("/", "_"))
+        proc = subprocess.run(
+            [sys.executable, "-m", "ptzd", "sim", "--scene", "synthetic:0", "--target", "6",
+             "--duration", "0.3", "--virtual-clock", "--record", str(rec), *extra],
+            capture_output=True, timeout=120, check=False,
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr.decode()[-2000:]
+        camera = json.loads((rec / "camera.jsonl").read_text().splitlines()[0])
+        truth = json.loads((rec / "groundtruth_view.jsonl").read_text().splitlines()[0])
+        return camera, truth["boxes"]["6"]
+
+    wide, box = first_view("--config", str(config))
+    assert wide["hfov"] == pytest.approx(60.0)
+    assert abs(box[0] + box[2] / 2 - 320) < 3 and abs(box[1] + box[3] / 2 - 240) < 3
+    assert box[3] < 480 / 6  # a small figure at the widest
+    near, box = first_view()
+    assert near["hfov"] < 40.0 and box[3] == pytest.approx(480 / 3, rel=0.1)

@@ -53,10 +53,18 @@ class SimConfig(StrictModel):
 
     # MJPEG stream
     jpeg_quality: int = Field(default=85, ge=10, le=100)
+    # in-process (`ptzd sim`): JPEG-code every frame at `jpeg_quality` before the daemon
+    # sees it, as the MJPEG stream (and `ptzd soak`) delivers it. camera.jsonl is unchanged:
+    # the pose rendered; only the daemon's picture is compressed
+    compress_frames: bool = False
     # in-process (`ptzd sim`): whether the daemon gets each frame's pose with it, as from a
     # dome that reports its position; false: as from a Pelco-P dome that reports nothing,
     # the daemon dead-reckons the pose from its commands (capture.latency_s applies)
     report_pose: bool = True
+    # in-process (`ptzd sim` with a target): the dome's FOV at the start, still pointed at
+    # the target (clamped to the lens); None: the FOV that makes the target a third of the
+    # view high. The soak's dome starts at the widest, its walkers a ninth of the view high.
+    start_hfov: float | None = Field(default=None, gt=0.1, lt=179.0)
 
     @model_validator(mode="after")
     def _check_ranges(self) -> SimConfig:

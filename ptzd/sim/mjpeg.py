@@ -13,6 +13,8 @@ import asyncio
 import contextlib
 
 import cv2
+import numpy as np
+import numpy.typing as npt
 
 from ptzd.logs import get_logger
 from ptzd.sim.camera import SimFrame
@@ -49,12 +51,11 @@ class MjpegServer:
         """Encode `frame` once (only if someone is watching) and wake every client."""
         if not self._clients:
             return
-        ok, jpeg = cv2.imencode(".jpg", frame.image, [cv2.IMWRITE_JPEG_QUALITY, self._quality])
-        if not ok:
+        data = encode_jpeg(frame.image, self._quality)
+        if data is None:
             _log.warning("jpeg_encode_failed", frame=frame.index)
             return
         self.frames_encoded += 1
-        data = jpeg.tobytes()
         header = (
             f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(data)}\r\n"
             f"X-Timestamp: {frame.t:.6f}\r\nX-Frame: {frame.index}\r\n\r\n"
@@ -102,3 +103,23 @@ class MjpegServer:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self._server.wait_closed(), 2.0)
             self._server = None
+
+
+def encode_jpeg(image: npt.NDArray[np.uint8], quality: int) -> bytes | None:
+    """`image` as JPEG at `quality` (None if OpenCV cannot encode it)."""
+    ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return jpeg.tobytes() if ok else None
+
+
+def jpeg_round_trip(image: npt.NDArray[np.uint8], quality: int) -> npt.NDArray[np.uint8]:
+    """`image` JPEG-coded at `quality` and decoded: what this camera's stream delivers
+    (chroma subsampled 4:2:0, blocking), for the in-process simulator (`[sim]
+    compress_frames`)."""
+    data = encode_jpeg(image, quality)
+    if data is None:  # pragma: no cover - OpenCV encodes any uint8 image
+        raise ValueError(f"cannot JPEG-encode an image of shape {image.shape}")
+    flags = cv2.IMREAD_GRAYSCALE if image.ndim == 2 else cv2.IMREAD_COLOR
+    decoded = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
+    if decoded is None:  # pragma: no cover - it decodes what it has just encoded
+        raise ValueError("cannot decode the JPEG just encoded")
+    return np.asarray(decoded, dtype=np.uint8)
