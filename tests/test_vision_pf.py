@@ -393,3 +393,19 @@ def test_only_a_match_in_every_part_ends_an_occlusion(threshold: float) -> None:
     else:
         # on the mean of the parts the impostor passes for the target
         assert set(with_impostor) == {TrackState.TRACKING}
+
+
+@pytest.mark.parametrize("threshold", [0.4, 0.0])
+def test_a_detection_re_identifies_the_target_only_on_a_match_in_every_part(
+    threshold: float,
+) -> None:
+    # (the mean's threshold under the impostor's mean of parts, as above)
+    occlusion = {"similarity_threshold": 0.5, "detection_part_threshold": threshold}
+    tracker = make_tracker(TrackerConfig.model_validate({"occlusion": occlusion}))
+    tracker.init(_impostor_frame(0, 10, 13, 40), (60.0, 80.0, 24.0, 60.0))
+    for t in range(1, 9):
+        tracker.update(_impostor_frame(t, 10, 13, 40))
+    target = (76.0, 80.0, 24.0, 60.0)
+    assert tracker.resembles(_impostor_frame(8, 10, 13, 40), target)
+    impostor = (100.0, 80.0, 24.0, 60.0)  # t = 20: same trousers, green top
+    assert tracker.resembles(_impostor_frame(20, 10, 13, 40), impostor) is (threshold == 0.0)

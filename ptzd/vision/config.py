@@ -117,8 +117,12 @@ class OcclusionConfig(StrictModel):
     # just their mean. Someone in the same trousers and another shirt scores 0.29-0.37 in
     # the top part and passes the mean; the target itself 0.75-0.8 (synthetic:0, walker 6
     # and the walker who comes out from behind the hedge). Not applied to a detection's
-    # box (`resembles`): looser, it scored the target's own top 0.41-0.48. 0: off.
+    # box (`resembles`): there the target's own top part scored 0.41-0.48. 0: off.
     part_threshold: float = Field(default=0.5, ge=0.0, le=1.0)
+    # ... and a detection re-identifies the target (`resembles`) only if every part scores
+    # at least this. Half a look-alike scored 0.29-0.39 there (with and without JPEG), the
+    # returning target 0.41-0.48 (synthetic:5): a thin margin, measured in docs/tracking.md.
+    detection_part_threshold: float = Field(default=0.4, ge=0.0, le=1.0)
     # Hysteresis (beyond the seed): an occluded target is back only at `recover_share` of
     # what it usually scores. Off (0, the seed's single threshold) by default: 0.9 kept a
     # pillar's edge from passing for the target in synthetic:12, but held back walkers

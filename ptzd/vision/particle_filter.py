@@ -273,11 +273,11 @@ class ParticleTracker:
         self._likelihood.rescale(factor)
 
     def resembles(self, frame: Frame, box: Box) -> bool:
-        # the mean of the parts only (no `part_threshold`): a detector's box is looser than
-        # the tracker's, and the target's own top half scored 0.41-0.48 in one (synthetic:5)
-        share = self._config.occlusion.match_share
+        occ = self._config.occlusion
         parts = self._likelihood.part_similarities(frame, centre_box(box))
-        return float(parts.mean()) >= self._share_of_usual(share)
+        if float(parts.min()) < occ.detection_part_threshold:
+            return False  # half of it matches (same trousers, another shirt): someone else
+        return float(parts.mean()) >= self._share_of_usual(occ.match_share)
 
     @property
     def state(self) -> TrackState:
