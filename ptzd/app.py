@@ -366,7 +366,7 @@ class Daemon:
         return self.estimate.pose_at(frame.capture_time)
 
     async def _vision(self) -> None:
-        tracker: Tracker | None = None  # following a target: `own`; none: None
+        tracker: Tracker | None = None  # `own` while there is a target, else None
         generation = self._generation
         previous: tuple[FrameItem, Pose] | None = None
         # One tracker for the camera, initialised again on every new target rather than

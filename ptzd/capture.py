@@ -166,6 +166,8 @@ class SimFrameSource:
         self._ready.set()
 
     async def frames(self) -> AsyncIterator[FrameItem]:
+        from ptzd.sim.mjpeg import jpeg_round_trip
+
         try:
             while True:
                 await self._ready.wait()
@@ -177,8 +179,6 @@ class SimFrameSource:
                     taken = frame.t - self.latency_s
                     image = frame.image
                     if self.jpeg_quality is not None:
-                        from ptzd.sim.mjpeg import jpeg_round_trip
-
                         image = jpeg_round_trip(image, self.jpeg_quality)
                     yield FrameItem(image, taken, frame.index, pose, wall)
         finally:

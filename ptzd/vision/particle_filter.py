@@ -139,7 +139,6 @@ class ParticleTracker:
         self._recent: deque[float] = deque(maxlen=_RECENT_FRAMES)
         self._stalled = False  # occluded by a look-alike edge (see OcclusionConfig.stall_lag)
         self._confidence = 0.0
-        self._weakest_part = 0.0  # the lowest part similarity of the last candidate
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold) if still.still_frames else None
         self._still_frames = 0  # consecutive frames in which the box did not move
@@ -216,7 +215,7 @@ class ParticleTracker:
                 [estimate[:2], (1 - rate) * self._box[2:] + rate * estimate[2:]]
             )
         parts = self._likelihood.part_similarities(frame, candidate)
-        sim, self._weakest_part = float(parts.mean()), float(parts.min())
+        sim, weakest = float(parts.mean()), float(parts.min())
         self._confidence = sim
         if self._box_is_still(candidate):
             sim = 0.0  # on something that does not move: not the person, however alike
@@ -234,7 +233,7 @@ class ParticleTracker:
             self._box[:2] = ahead
         elif self._stalled and sim < self._config.occlusion.reacquire_threshold:
             sim = 0.0  # still behind the look-alike: only a clean match ends it
-        self._transition(sim)
+        self._transition(sim, weakest)
         if self._state is not TrackState.OCCLUDED:
             self._stalled = False
         if self._state is TrackState.TRACKING:
@@ -406,11 +405,13 @@ class ParticleTracker:
         state: FloatArray = w @ p
         return state[[X, Y, W, H]]
 
-    def _transition(self, similarity: float) -> None:
+    def _transition(self, similarity: float, weakest_part: float) -> None:
+        """The state after a frame whose candidate scored `similarity` (the mean of its
+        parts) and `weakest_part` (their minimum)."""
         occ = self._config.occlusion
         if self._state is TrackState.LOST:
             self._lost_frames += 1
-            whole = self._weakest_part >= occ.part_threshold
+            whole = weakest_part >= occ.part_threshold
             if occ.reacquire and similarity >= occ.reacquire_threshold and whole:
                 self._reacquire_hits += 1
                 if self._reacquire_hits >= occ.reacquire_frames:
@@ -422,7 +423,7 @@ class ParticleTracker:
                 self._reacquire_hits = 0
             return
         # what comes back from an occlusion must match in every part, not on average
-        whole = self._state is not TrackState.OCCLUDED or self._weakest_part >= occ.part_threshold
+        whole = self._state is not TrackState.OCCLUDED or weakest_part >= occ.part_threshold
         if similarity >= self._back_threshold() and whole:
             self._state = TrackState.TRACKING
             self._occluded_frames = 0
