@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from ptzd import heap
 from ptzd.capture import FrameItem, FrameSource
 from ptzd.clock import Clock
 from ptzd.config import Config
@@ -133,6 +134,7 @@ class DaemonStats:
     commands_sent: int = 0
     stale_stops: int = 0
     zoom_steps: int = 0
+    heap_trims: int = 0  # malloc's free pages handed back (`ptzd.heap`)
     # seconds from frame capture to its command being written (or confirmed unchanged), the
     # latest LATENCY_SAMPLES of them
     latencies: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCY_SAMPLES))
@@ -171,6 +173,7 @@ class Daemon:
         watchdog_environ: Mapping[str, str] | None = None,
         health_max_age_s: float = HEALTH_MAX_AGE_S,
         status_interval_s: float = STATUS_INTERVAL_S,
+        heap_trim_interval_s: float = heap.TRIM_INTERVAL_S,
     ) -> None:
         self.config = config
         self.source = source
@@ -189,6 +192,7 @@ class Daemon:
         self.heartbeats = Heartbeats(("frame", "control"), clock=clock)
         self.health_max_age_s = health_max_age_s
         self.status_interval_s = status_interval_s
+        self.heap_trim_interval_s = heap_trim_interval_s
         self._watchdog_environ = watchdog_environ  # None: os.environ (WATCHDOG_USEC)
         self._track_state = "waiting"  # for STATUS=
         self._stopping_sent = False
@@ -378,8 +382,13 @@ class Daemon:
         if self._pending_box is not None:
             own = await self._blocking(self.tracker_factory)
         self.ready.set()
+        next_trim = self.clock.now() + self.heap_trim_interval_s
         try:
             while True:
+                if self.clock.now() >= next_trim:  # between frames, on the vision thread
+                    await self._blocking(heap.trim)
+                    self.stats.heap_trims += 1
+                    next_trim = self.clock.now() + self.heap_trim_interval_s
                 try:
                     frame = await self.frames.get()
                 except MailboxClosedError:

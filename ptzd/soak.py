@@ -48,6 +48,7 @@ from typing import IO, Any
 
 from ptzd.closed_loop import in_central_cell
 from ptzd.errors import UsageError
+from ptzd.heap import malloc_stats
 from ptzd.pelco.codec import FrameParser, Motion
 
 FAULTS = ("serial-reset", "stream-stall", "broker-restart")
@@ -122,6 +123,7 @@ def _probe_loop(loop: asyncio.AbstractEventLoop, path: Path, interval: float) ->
                 sample = {"lag_s": time.monotonic() - asked}
             sample["t"] = time.monotonic()
             sample["threads"] = threading.active_count()
+            sample.update(malloc_stats())
             out.write(json.dumps(sample) + "\n")
             out.flush()
 
@@ -355,19 +357,28 @@ class NotifySocket:
 
 def proc_sample(pid: int) -> dict[str, float]:
     """RSS (MB), its anonymous part (the heap, where a leak would show; the rest is pages
-    of mapped files such as the libraries), and open file descriptors, from /proc."""
+    of mapped files such as the libraries), open file descriptors, and the OS threads (the
+    probe's `threads` counts Python's; FFmpeg's and OpenCV's are native), from /proc."""
     rss_kb = anon_kb = 0
+    os_threads = -1
     with contextlib.suppress(OSError):
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
             if line.startswith("VmRSS:"):
                 rss_kb = int(line.split()[1])
             elif line.startswith("RssAnon:"):
                 anon_kb = int(line.split()[1])
+            elif line.startswith("Threads:"):
+                os_threads = int(line.split()[1])
     try:
         fds = sum(1 for _ in Path(f"/proc/{pid}/fd").iterdir())
     except OSError:
         fds = -1
-    return {"rss_mb": rss_kb / 1024, "rss_anon_mb": anon_kb / 1024, "fds": fds}
+    return {
+        "rss_mb": rss_kb / 1024,
+        "rss_anon_mb": anon_kb / 1024,
+        "fds": fds,
+        "os_threads": os_threads,
+    }
 
 
 def _last_probe(path: Path) -> dict[str, Any]:
@@ -688,6 +699,7 @@ class Soak:
                 "tasks": last.get("tasks"),
                 "lag_ms": round(1000 * last["lag_s"], 2) if "lag_s" in last else None,
                 "threads": last.get("threads"),
+                **{k: v for k, v in last.items() if k.startswith("malloc_")},
                 "commands": proxy.commands,
                 "mqtt_messages": watcher.messages,
                 "frames": notify.frames,
