@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import gc
+import weakref
+
 import cv2
 import numpy as np
 import pytest
 
 from ptzd.vision.color import (
+    _PER_GRID,
     ColorLikelihood,
     background_weights,
     bhattacharyya,
@@ -72,6 +76,26 @@ def test_vectorised_histograms_equal_the_slow_reference(parts: int, collapse: bo
     sub_bins = pad_bins(bin_image(frame[10:55, 20:70], luts), 216)
     sub = box_histograms(sub_bins, (20, 10), boxes[:1], grid, 216)
     np.testing.assert_allclose(sub, fast[:1])
+
+
+def test_a_grids_per_box_count_arrays_are_bounded_and_go_with_the_grid() -> None:
+    """A lock makes a new grid (the box's aspect); what `box_histograms` keeps for a grid
+    (per box count) is freed with it, and a few box counts are kept at most."""
+    rng = np.random.default_rng(5)
+    luts = make_luts(ColorConfig())
+    bins = pad_bins(bin_image(rng.integers(0, 256, (60, 80, 3), dtype=np.uint8), luts), 216)
+    grid = kernel_grid(16, 32, aspect=0.4, parts=2)
+    first = box_histograms(bins, (0, 0), np.tile([40.0, 30.0, 20.0, 30.0], (300, 1)), grid, 216)
+    for n in range(1, 12):  # more box counts than are kept
+        boxes = np.tile([40.0, 30.0, 20.0, 30.0], (n, 1))
+        again = box_histograms(bins, (0, 0), boxes, grid, 216)
+        np.testing.assert_array_equal(again, first[:n])
+    assert len(grid._per_n) == _PER_GRID
+    held = weakref.ref(grid._per_n[(11, 216)][1])
+    gone = weakref.ref(grid)
+    del grid
+    gc.collect()
+    assert gone() is None and held() is None
 
 
 def test_kernel_weighs_the_centre_most() -> None:

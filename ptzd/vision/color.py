@@ -18,7 +18,7 @@ histogram applied to the target model only).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -124,6 +124,12 @@ class SampleGrid:
     weights: FloatArray  # (rows, cols)
     part: NDArray[np.intp]  # (rows,) stripe of each row
     parts: int
+    # `box_histograms`' arrays for n boxes, kept with the grid so that they go with it: a
+    # module-level cache keyed by grid held up to 16 of them (1.2 MB each at 300 particles)
+    # for the grids of locks long ended, and the heap rose and fell by 10 MB with them
+    _per_n: dict[tuple[int, int], tuple[NDArray[np.intp], FloatArray]] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
 
 def _offsets(n: int, extent: float = 1.0) -> FloatArray:
@@ -169,17 +175,23 @@ def ring_grid(cols: int, rows: int, ring_scale: float) -> SampleGrid:
     return SampleGrid(u, v, weights, part, 1)
 
 
-@functools.lru_cache(maxsize=16)
-def _tiled_weights(grid: SampleGrid, n: int) -> FloatArray:
-    """The grid's weights repeated for n boxes, contiguous (bincount wants a flat array)."""
-    return np.tile(grid.weights.ravel(), n)
+_PER_GRID = 4  # box counts kept per grid: the particles, one box, and room to spare
 
 
-@functools.lru_cache(maxsize=16)
-def _offsets_for(grid: SampleGrid, n: int, n_bins: int) -> NDArray[np.intp]:
-    """Histogram column offset of every sample: box * parts * (bins + 1) + part * (bins + 1)."""
-    per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None, None]
-    return per_box + (grid.part * (n_bins + 1))[None, :, None]
+def _per_n_arrays(grid: SampleGrid, n: int, n_bins: int) -> tuple[NDArray[np.intp], FloatArray]:
+    """For n boxes on `grid`: the histogram column offset of every sample (box * parts *
+    (bins + 1) + part * (bins + 1)), and the grid's weights repeated n times, contiguous
+    (bincount wants a flat array). Kept for the last `_PER_GRID` (n, n_bins)."""
+    key = (n, n_bins)
+    found = grid._per_n.pop(key, None)  # re-inserted below: the dict is oldest first
+    if found is None:
+        per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None, None]
+        offsets = per_box + (grid.part * (n_bins + 1))[None, :, None]
+        found = (offsets, np.tile(grid.weights.ravel(), n))
+        while len(grid._per_n) >= _PER_GRID:
+            del grid._per_n[next(iter(grid._per_n))]
+    grid._per_n[key] = found
+    return found
 
 
 def bins_for_region(
@@ -238,10 +250,11 @@ def box_histograms(
     index = ys[:, :, None] + xs[:, None, :]
     sampled = padded.ravel().take(index)
     stride = grid.parts * (n_bins + 1)
-    np.add(_offsets_for(grid, n, n_bins), sampled, out=index)
-    hist: FloatArray = np.bincount(
-        index.ravel(), weights=_tiled_weights(grid, n), minlength=n * stride
-    ).astype(np.float64, copy=False)
+    offsets, weights = _per_n_arrays(grid, n, n_bins)
+    np.add(offsets, sampled, out=index)
+    hist: FloatArray = np.bincount(index.ravel(), weights=weights, minlength=n * stride).astype(
+        np.float64, copy=False
+    )
     return hist.reshape(n, grid.parts, n_bins + 1)
 
 
