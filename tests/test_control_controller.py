@@ -129,6 +129,23 @@ def test_zoom_step_is_a_timed_pulse_and_counts_a_layer() -> None:
     assert after.motion.zoom == Zoom.NONE and ctl.zoom_layer == 1  # dwell: no second step yet
 
 
+def test_zoom_in_waits_for_a_confident_track_zoom_out_does_not() -> None:
+    # a half-hidden walker's box shrinks and its confidence drops: no zoom in on it
+    gated = ZoomConfig(confirm_s=0.0, in_min_confidence=0.8)
+    small = Box(305, 195, 30, 90)  # 0.75 x desired, centred and still
+    unsure = TrackInput(small, (0.0, 0.0), TrackState.TRACKING, 0.75, 0.0)
+    ctl = _controller(zoom=gated)
+    assert ctl.update(unsure, now=0.0, hfov=40.0).motion == STOP and ctl.zoom_layer == 0
+    sure = TrackInput(small, (0.0, 0.0), TrackState.TRACKING, 0.85, 0.1)
+    assert ctl.update(sure, now=0.1, hfov=40.0).motion.zoom == Zoom.IN and ctl.zoom_layer == 1
+    big = Box(290, 150, 60, 180)  # 1.5 x desired: out, however unsure
+    ctl = _controller(zoom=gated)
+    out = ctl.update(TrackInput(big, (0.0, 0.0), TrackState.TRACKING, 0.5, 0.0), 0.0, 40.0)
+    assert out.motion.zoom == Zoom.OUT and ctl.zoom_layer == -1
+    ungated = _controller(zoom=ZoomConfig(confirm_s=0.0, in_min_confidence=0.0))
+    assert ungated.update(unsure, now=0.0, hfov=40.0).motion.zoom == Zoom.IN
+
+
 def test_stale_track_aborts_a_zoom_pulse() -> None:
     ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), max_track_age_s=0.2)
     assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.0, hfov=40.0).motion.zoom == Zoom.IN

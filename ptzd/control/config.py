@@ -78,6 +78,11 @@ class ZoomConfig(StrictModel):
     log_rate: float = Field(default=0.75, gt=0.01, le=20.0)
     min_step_s: float = Field(default=0.05, gt=0.0, le=5.0)
     max_step_s: float = Field(default=1.0, gt=0.0, le=10.0)
+    # Beyond the seed: zoom in only on a track at least this confident (0: always; 0.8 as
+    # feed-forward's gate). A half-hidden walker's box shrinks; zooming in on it spent the
+    # reversal guard, and the zoom could not go out again while he walked up to the camera
+    # (docs/control.md). Zooming out is never held back.
+    in_min_confidence: float = Field(default=0.8, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:

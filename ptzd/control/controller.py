@@ -217,7 +217,8 @@ class PtzController:
                 self.frame_size,
                 speed,
                 now,
-                can_in=hfov > dome.hfov_tele * 1.01,
+                can_in=hfov > dome.hfov_tele * 1.01
+                and track.confidence >= cfg.zoom.in_min_confidence,
                 can_out=hfov < dome.hfov_wide * 0.99,
             )
             if step is not None:
