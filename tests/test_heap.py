@@ -17,14 +17,13 @@ GLIBC = bool(heap.malloc_stats())
 # second thread (its own malloc arena, as the daemon's vision worker has): the freed space
 # sits between live blocks, so malloc cannot give it back by shrinking the heap's top.
 FRAGMENT_THEN_TRIM = """
-import json, threading
+import json, os, threading
 import numpy as np
 from ptzd import heap
+from ptzd.soak import proc_sample
 
 def anon_mb():
-    for line in open("/proc/self/status"):
-        if line.startswith("RssAnon:"):
-            return int(line.split()[1]) / 1024
+    return proc_sample(os.getpid())["rss_anon_mb"]
 
 pins = []
 def fragment():
