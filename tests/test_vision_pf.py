@@ -341,9 +341,10 @@ def test_with_hysteresis_an_occluded_target_comes_back_only_at_what_it_usually_s
     assert states[25:48] == "o" * 23 and states[48:69] == "l" * 21
     # ... and the target itself does, once it shows again (re-acquisition: 2 frames at 0.8)
     assert states[71:] == "t" * (89 - 71)
-    # the seed's single threshold takes the look-alike for the target at once
+    # the seed's single threshold takes the look-alike for the target within a frame (the
+    # box coasting at full speed may be a frame past it) and keeps it
     seed = _look_alike_states(TrackerConfig.model_validate(_SEED_ONLY))
-    assert seed[25:69] == "t" * 44
+    assert seed[25] in "ot" and seed[26:69] == "t" * 43
 
 
 @pytest.mark.parametrize("kind", ["color", "rf", "svm"])
