@@ -224,3 +224,36 @@ def test_part_similarities_tell_half_a_match_from_a_whole_one() -> None:
     np.testing.assert_allclose(whole, [1.0, 1.0])
     assert half[0] < 0.5 < 0.9 < half[1]  # top to bottom
     assert likelihood.similarity(impostor, centre) == pytest.approx(half.mean())
+
+
+def test_weighted_confidence_discounts_background_in_the_box_not_another_person() -> None:
+    from tests.vision_helpers import background, draw_person
+
+    hedge = (40, 150, 60)  # BGR: most of what is around the target
+    box = (100.0, 60.0, 30.0, 80.0)
+    centre = np.array([115.0, 100.0, 30.0, 80.0])
+    scene = background(320, 240, 0)[:240, :320].copy()
+    scene[30:170, 60:170] = hedge
+    target = scene.copy()
+    draw_person(target, box, (40, 40, 200), (160, 60, 20))
+    behind = target.copy()
+    behind[60:75, 95:135] = hedge  # the hedge comes into the top of his box
+    impostor = scene.copy()
+    draw_person(impostor, box, (200, 120, 40), (160, 60, 20))  # same trousers, blue top
+    plain = ColorLikelihood(ColorConfig(parts=2, weighted_confidence=False), GmmConfig())
+    weighted = ColorLikelihood(ColorConfig(parts=2, weighted_confidence=True), GmmConfig())
+    for likelihood in (plain, weighted):
+        likelihood.init(target, centre)
+    np.testing.assert_allclose(weighted.part_similarities(target, centre), [1.0, 1.0])
+    top_plain = plain.part_similarities(behind, centre)[0]
+    top_weighted = weighted.part_similarities(behind, centre)[0]
+    assert top_plain < 0.85 and top_weighted > 0.95 > top_plain + 0.1
+    # another shirt is not background: it still fails the part test
+    assert weighted.part_similarities(impostor, centre)[0] < 0.5
+    # the part of a box outside the frame still costs what it did
+    edge = scene.copy()
+    draw_person(edge, (-15.0, 60.0, 30.0, 80.0), (40, 40, 200), (160, 60, 20))
+    cut = np.array([0.0, 100.0, 30.0, 80.0])
+    half = weighted.similarity(edge, cut)
+    assert half < 0.8
+    assert half == pytest.approx(plain.similarity(edge, cut), abs=0.05)

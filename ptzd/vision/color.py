@@ -441,9 +441,24 @@ class ColorLikelihood:
         hist = self.histograms(frame, box[None, :])
         self._last = (frame, box.copy(), hist[0])
         parts = self._config.parts
+        if self._config.weighted_confidence and self._ring is not None:
+            return self._weighted_similarities(hist[0])
         # per part: sum_u sqrt(p_u q_u); `_sqrt_model` carries a 1/parts factor (the mean)
         terms = np.sqrt(hist[0]) * self._sqrt_model.reshape(parts, -1)
         rho: FloatArray = np.clip(parts * terms.sum(axis=1), 0.0, 1.0)
+        return rho
+
+    def _weighted_similarities(self, hist: FloatArray) -> FloatArray:
+        """Per part, the box's histogram background-weighted like the model, against the
+        weighted model. The weighted in-box colours keep their total share of the box, so
+        the share outside the frame (the last column) still costs what it did."""
+        assert self._ring is not None
+        n = self.n_bins
+        inside = hist[:, :n]
+        weighted = inside * background_weights(self._ring)[None, :]
+        total, kept = inside.sum(axis=1, keepdims=True), weighted.sum(axis=1, keepdims=True)
+        weighted *= np.where(kept > 0, total / np.where(kept > 0, kept, 1.0), 0.0)
+        rho: FloatArray = np.clip(np.sqrt(weighted * self._weighted_model).sum(axis=1), 0.0, 1.0)
         return rho
 
     def similarity(self, frame: Frame, box: FloatArray) -> float:

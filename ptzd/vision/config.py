@@ -55,6 +55,14 @@ class ColorConfig(StrictModel):
     ring_scale: float = Field(default=2.0, gt=1.0, le=5.0)
     # Per-frame rate at which the ring histogram follows the current surroundings.
     background_rate: float = Field(default=0.1, ge=0.0, le=1.0)
+    # The confidence measure (`part_similarities`: occlusion, re-acquisition, re-identification)
+    # compares background-weighted histograms on both sides, the box's own as well as the
+    # target model (beyond the seed): background-coloured pixels in the box then cost little
+    # (a hedge coming into the top of a walker's box took his top part from 0.95 to 0.6 and
+    # let a passer-by in the same trousers pass for him, synthetic:13). False: the plain
+    # model against the plain box histogram (the particle weights use the weighted model
+    # either way).
+    weighted_confidence: bool = True
     # Scale cue (beyond the seed): a box's score is rho - scale_contrast * rho_ring, rho_ring
     # the similarity of the ring out to `contrast_scale` x the box to the target. A box too
     # small has a target-coloured ring, so the colour histogram no longer favours shrinking.
@@ -121,9 +129,11 @@ class OcclusionConfig(StrictModel):
     # box (`resembles`): there the target's own top part scored 0.41-0.48. 0: off.
     part_threshold: float = Field(default=0.5, ge=0.0, le=1.0)
     # ... and a detection re-identifies the target (`resembles`) only if every part scores
-    # at least this. Half a look-alike scored 0.29-0.39 there (with and without JPEG), the
-    # returning target 0.41-0.48 (synthetic:5): a thin margin, measured in docs/tracking.md.
-    detection_part_threshold: float = Field(default=0.4, ge=0.0, le=1.0)
+    # at least this. With the plain measure half a look-alike scored 0.29-0.39 there (with
+    # and without JPEG), the returning target 0.41-0.48 (synthetic:5), and the threshold was
+    # 0.4; with `color.weighted_confidence` the returning target's top part scores 0.38-0.41
+    # and a bigger passer-by's legs 0.26 (synthetic:7): a thin margin (docs/tracking.md).
+    detection_part_threshold: float = Field(default=0.35, ge=0.0, le=1.0)
     # Hysteresis (beyond the seed): an occluded target is back only at `recover_share` of
     # what it usually scores. Off (0, the seed's single threshold) by default: 0.9 kept a
     # pillar's edge from passing for the target in synthetic:12, but held back walkers
