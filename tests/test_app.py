@@ -358,7 +358,10 @@ async def test_a_select_after_a_manual_move_is_kept_with_acquisition_on() -> Non
     after = items[selected_from:]
     reasons = [t.reason for item in after for t in item.transitions]
     assert reasons[:1] == ["selected"] and "reset" not in reasons
-    assert after and all(item.published_state == "tracking" for item in after)
+    # kept: never handed back to acquisition (a one-frame occlusion of the tracker itself,
+    # seen once on a loaded machine, is not what this tests)
+    assert after and all(item.published_state in ("tracking", "occluded") for item in after)
+    assert after[-1].published_state == "tracking"
 
 
 def test_the_acquirers_boxes_move_with_the_view() -> None:
