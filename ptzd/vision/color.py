@@ -316,6 +316,8 @@ class ColorLikelihood:
         )
         self._gmm: GmmTargetModel | None = None
         self._ring: FloatArray | None = None
+        # background_weights() of the ring, as last applied to the model (None: unweighted)
+        self._background: FloatArray | None = None
         self._weighted_model: FloatArray = np.zeros((config.parts, self._luts.n_bins))
         # sqrt_model() of the weighted model, its part-mean and the plain model
         self._sqrt_weighted: FloatArray = sqrt_model(self._weighted_model)
@@ -400,8 +402,10 @@ class ColorLikelihood:
     def _reweight(self) -> None:
         assert self._gmm is not None
         q = self._gmm.model
+        self._background = None
         if self._config.background_weighting and self._ring is not None:
-            q = _normalised(q * background_weights(self._ring)[None, :])
+            self._background = background_weights(self._ring)
+            q = _normalised(q * self._background[None, :])
         self._weighted_model = q
         self._sqrt_weighted = sqrt_model(q)
         self._sqrt_weighted_mean = sqrt_model(q.mean(axis=0, keepdims=True))
@@ -440,24 +444,23 @@ class ColorLikelihood:
     def part_similarities(self, frame: Frame, box: FloatArray) -> FloatArray:
         hist = self.histograms(frame, box[None, :])
         self._last = (frame, box.copy(), hist[0])
+        if self._config.weighted_confidence and self._background is not None:
+            return self._weighted_similarities(hist[0], self._background)
         parts = self._config.parts
-        if self._config.weighted_confidence and self._ring is not None:
-            return self._weighted_similarities(hist[0])
         # per part: sum_u sqrt(p_u q_u); `_sqrt_model` carries a 1/parts factor (the mean)
         terms = np.sqrt(hist[0]) * self._sqrt_model.reshape(parts, -1)
         rho: FloatArray = np.clip(parts * terms.sum(axis=1), 0.0, 1.0)
         return rho
 
-    def _weighted_similarities(self, hist: FloatArray) -> FloatArray:
-        """Per part, the box's histogram background-weighted like the model, against the
+    def _weighted_similarities(self, hist: FloatArray, background: FloatArray) -> FloatArray:
+        """Per part, the box's histogram weighted by `background` like the model, against the
         weighted model. The weighted in-box colours keep their total share of the box, so
         the share outside the frame (the last column) still costs what it did."""
-        assert self._ring is not None
-        n = self.n_bins
-        inside = hist[:, :n]
-        weighted = inside * background_weights(self._ring)[None, :]
-        total, kept = inside.sum(axis=1, keepdims=True), weighted.sum(axis=1, keepdims=True)
-        weighted *= np.where(kept > 0, total / np.where(kept > 0, kept, 1.0), 0.0)
+        inside = hist[:, : self.n_bins]
+        weighted = inside * background[None, :]
+        kept = weighted.sum(axis=1, keepdims=True)
+        # (a part with nothing kept is all zeros: any finite scale leaves it so)
+        weighted *= inside.sum(axis=1, keepdims=True) / np.where(kept > 0, kept, 1.0)
         rho: FloatArray = np.clip(np.sqrt(weighted * self._weighted_model).sum(axis=1), 0.0, 1.0)
         return rho
 
