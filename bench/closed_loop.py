@@ -10,6 +10,12 @@ time from a frame being rendered to its command being written (tracker included)
 machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
+        [--box-scale 1.3]
+
+`--box-scale F` plays the vtest cases with every annotated box (the initial one included)
+F times as wide and tall about its centre, clipped to the frame: how much the outcome hangs
+on how tightly someone else drew the boxes (centring is scored on the box centres, which do
+not move).
 
 The outcome of a case is close to binary (the tracker stays on the target through a
 crossing, or it does not) and which way it goes can hang on the particle filter's random
@@ -24,6 +30,7 @@ import asyncio
 import itertools
 import json
 import statistics
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -34,15 +41,42 @@ ROOT = Path(__file__).resolve().parents[1]
 VTEST = ROOT / "data" / "vtest.avi"
 
 
-def cases(seeds: list[int]) -> list[tuple[str, str, str | None, int | None]]:
+def cases(
+    seeds: list[int], box_scale: float = 1.0, scaled_dir: Path | None = None
+) -> list[tuple[str, str, str | None, int | None]]:
+    """(name, source, ground truth, target) per case; with `box_scale` != 1 the vtest
+    annotations are written, boxes scaled, under `scaled_dir` and played from there."""
     out: list[tuple[str, str, str | None, int | None]] = [
         (f"synthetic:{s}", f"synthetic:{s}", None, None) for s in seeds
     ]
     if VTEST.exists():
         for gt in sorted((ROOT / "bench" / "annotations").glob("vtest_*.json")):
             doc = json.loads(gt.read_text())
+            if box_scale != 1.0:
+                if scaled_dir is None:
+                    raise ValueError("box_scale needs a directory for the scaled annotations")
+                gt = scaled_dir / gt.name
+                gt.write_text(json.dumps(scale_boxes(doc, box_scale)))
             for track in doc["tracks"]:
                 out.append((f"vtest#{track['id']}", str(VTEST), str(gt), int(track["id"])))
+    return out
+
+
+def scale_boxes(doc: dict[str, Any], factor: float) -> dict[str, Any]:
+    """A ground-truth document with every box `factor` times the size about its centre,
+    clipped to the frame (`size`)."""
+    width, height = doc["size"]
+    out: dict[str, Any] = json.loads(json.dumps(doc))
+    for track in out["tracks"]:
+        for frame, box in track["frames"].items():
+            if box is None:
+                continue
+            x, y, w, h = box
+            cx, cy = x + w / 2, y + h / 2
+            x0, y0 = max(0.0, cx - w * factor / 2), max(0.0, cy - h * factor / 2)
+            x1, y1 = min(width, cx + w * factor / 2), min(height, cy + h * factor / 2)
+            scaled = (x0, y0, x1 - x0, y1 - y0)
+            track["frames"][frame] = [round(v, 2) for v in scaled]
     return out
 
 
@@ -80,6 +114,31 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return out
 
 
+def run_row(name: str, spec: str, gt: str | None, target: int | None, tracker_seed: int,
+            args: argparse.Namespace) -> dict[str, Any]:  # fmt: skip
+    """One case with one tracker seed: the table row."""
+    record = None
+    if args.record:
+        record = args.record / f"{name.replace(':', '_').replace('#', '_')}_t{tracker_seed}"
+    report = asyncio.run(
+        run_case(spec, gt, target, args.duration, record, tracker_seed, args.override)
+    )
+    latency = report["latency_ms"]
+    return {
+        "case": name,
+        "tracker_seed": tracker_seed,
+        "frames": report["frames_scored"],
+        "centred": report["centred_fraction"],
+        "in_view": report["in_view_fraction"],
+        "size_err_median": report["size_error_median"],
+        "latency_p50_ms": latency["p50_ms"],
+        "latency_p99_ms": latency["p99_ms"],
+        "reversals": report["zoom_reversals"],
+        "max_reversals_per_10s": report["max_reversals_per_10s"],
+        "dropped": report["frames_dropped"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2])
@@ -93,34 +152,20 @@ def main() -> None:
         metavar="JSON",
         help='config overrides, e.g. \'{"control": {"feedforward": 0}}\'',
     )
+    parser.add_argument(
+        "--box-scale", type=float, default=1.0, help="vtest boxes this many times as large"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "closed_loop.json")
     args = parser.parse_args()
-    rows = []
-    for (name, spec, gt, target), tracker_seed in itertools.product(
-        cases(args.seeds), args.tracker_seeds
-    ):
-        record = None
-        if args.record:
-            record = args.record / f"{name.replace(':', '_').replace('#', '_')}_t{tracker_seed}"
-        report = asyncio.run(
-            run_case(spec, gt, target, args.duration, record, tracker_seed, args.override)
-        )
-        latency = report["latency_ms"]
-        rows.append(
-            {
-                "case": name,
-                "tracker_seed": tracker_seed,
-                "frames": report["frames_scored"],
-                "centred": report["centred_fraction"],
-                "in_view": report["in_view_fraction"],
-                "size_err_median": report["size_error_median"],
-                "latency_p50_ms": latency["p50_ms"],
-                "latency_p99_ms": latency["p99_ms"],
-                "reversals": report["zoom_reversals"],
-                "max_reversals_per_10s": report["max_reversals_per_10s"],
-                "dropped": report["frames_dropped"],
-            }
-        )
+    if not 0.2 <= args.box_scale <= 5.0:
+        parser.error(f"--box-scale must be in [0.2, 5], got {args.box_scale}")
+    with tempfile.TemporaryDirectory(prefix="ptzd-gt-") as scaled_dir:
+        rows = [
+            run_row(name, spec, gt, target, tracker_seed, args)
+            for (name, spec, gt, target), tracker_seed in itertools.product(
+                cases(args.seeds, args.box_scale, Path(scaled_dir)), args.tracker_seeds
+            )
+        ]
     header = f"{'case':<14}{'tseed':>6}{'frames':>7}{'centred':>9}{'in view':>9}{'size err':>9}"
     header += f"{'p50 ms':>8}{'p99 ms':>8}{'rev':>5}{'rev/10s':>8}"
     print(header)
@@ -139,8 +184,8 @@ def main() -> None:
         )
     out = args.out
     out.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"duration_s": args.duration, "override": args.override, "summary": summary,
-           "rows": rows}  # fmt: skip
+    doc = {"duration_s": args.duration, "override": args.override,
+           "box_scale": args.box_scale, "summary": summary, "rows": rows}  # fmt: skip
     out.write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {out}")
 

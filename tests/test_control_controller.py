@@ -146,6 +146,35 @@ def test_zoom_in_waits_for_a_confident_track_zoom_out_does_not() -> None:
     assert ungated.update(unsure, now=0.0, hfov=40.0).motion.zoom == Zoom.IN
 
 
+def test_zoom_in_waits_when_the_box_shrank_faster_than_a_person_does() -> None:
+    # a box collapsing onto the torso of a walker behind a lamp post: no zoom in on it until
+    # it has been that small for in_height_window_s; a zoom step does not count as a shrink
+    zoom = ZoomConfig(confirm_s=0.0, in_height_window_s=3.0, in_min_height_share=0.75)
+    tall, collapsed = TARGET, Box(310, 210, 20, 66)  # 1.0 and 0.55 x desired, centred
+    ctl = _controller(zoom=zoom)
+    for i in range(10):  # 1 s at the desired height: inside the band, no step
+        assert ctl.update(_track(tall, i * 0.1), now=i * 0.1, hfov=40.0).zoom_step is None
+    for t in (1.0, 2.0, 3.9):  # the tall box is still within 3 s: held
+        assert ctl.update(_track(collapsed, t), now=t, hfov=40.0).zoom_step is None
+    step = ctl.update(_track(collapsed, 4.05), now=4.05, hfov=40.0).zoom_step
+    assert step is not None and step.direction > 0  # small for 3 s: a real size now
+    # the same collapse without the guard zooms in at once
+    ctl = _controller(zoom=zoom.model_copy(update={"in_height_window_s": 0.0}))
+    ctl.update(_track(tall, 0.0), now=0.0, hfov=40.0)
+    assert ctl.update(_track(collapsed, 1.0), now=1.0, hfov=40.0).zoom_step is not None
+    # heights are angles: the same target after a zoom out (half the pixels at twice the
+    # FOV's tangent) is not a shrink, and a step in on it is taken straight away
+    ctl = _controller(zoom=zoom)
+    ctl.update(_track(tall, 0.0), now=0.0, hfov=20.0)
+    wide = math.degrees(2 * math.atan(2 * math.tan(math.radians(10.0))))
+    assert ctl.update(_track(collapsed, 0.5), now=0.5, hfov=wide).zoom_step is not None
+    # unconfident boxes are not remembered: a blurred, oversized one does not hold zoom in
+    ctl = _controller(zoom=zoom)
+    tall_unsure = TrackInput(Box(300, 175, 44, 130), (0.0, 0.0), TrackState.TRACKING, 0.5, 0.0)
+    assert ctl.update(tall_unsure, now=0.0, hfov=40.0).zoom_step is None  # in the band
+    assert ctl.update(_track(collapsed, 2.0), now=2.0, hfov=40.0).zoom_step is not None
+
+
 def test_stale_track_aborts_a_zoom_pulse() -> None:
     ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), max_track_age_s=0.2)
     assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.0, hfov=40.0).motion.zoom == Zoom.IN

@@ -83,6 +83,13 @@ class ZoomConfig(StrictModel):
     # reversal guard, and the zoom could not go out again while he walked up to the camera
     # (docs/control.md). Zooming out is never held back.
     in_min_confidence: float = Field(default=0.8, ge=0.0, le=1.0)
+    # Beyond the seed: zoom in only on a box at least `in_min_height_share` of the tallest
+    # the target has been (as an angle, so zooming does not change it) in the last
+    # `in_height_window_s` seconds (0: off). A person does not lose a quarter of his height
+    # in a few seconds; a tracker box that collapses onto his torso behind a lamp post does,
+    # and a zoom in on it made him twice the desired size (synthetic:16, docs/control.md).
+    in_height_window_s: float = Field(default=3.0, ge=0.0, le=60.0)
+    in_min_height_share: float = Field(default=0.75, gt=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:

@@ -23,6 +23,7 @@ Per update:
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 from ptzd.control.config import AxisConfig, ControlConfig
@@ -32,6 +33,7 @@ from ptzd.control.regions import NineRegionFov, Region
 from ptzd.control.zoom import Box, ZoomController, ZoomDirection, ZoomStep
 from ptzd.pelco.codec import MAX_SPEED as PELCO_MAX_SPEED
 from ptzd.pelco.codec import STOP, Motion, Preset, PresetAction, Zoom
+from ptzd.sim.camera_model import focal_length
 from ptzd.vision.tracking import TrackState
 
 __all__ = ["STOP", "ControlDecision", "PtzController", "TrackInput"]
@@ -92,6 +94,8 @@ class PtzController:
         self._lost_since: float | None = None
         self._went_home = False
         self._widen_until = -math.inf  # zooming fully out instead of a home preset
+        # (capture time, box height / focal length) of recent confident tracks: zoom-free
+        self._heights: deque[tuple[float, float]] = deque()
 
     @property
     def zoom_layer(self) -> int:
@@ -101,6 +105,7 @@ class PtzController:
         """A new target: its box sets the desired size; the loop starts from rest."""
         self.zoom.set_desired_from_box(box, self.frame_size[1])
         self._rest()
+        self._heights.clear()
         self._lost_since = None
         self._went_home = False
         self._widen_until = -math.inf
@@ -218,7 +223,8 @@ class PtzController:
                 speed,
                 now,
                 can_in=hfov > dome.hfov_tele * 1.01
-                and track.confidence >= cfg.zoom.in_min_confidence,
+                and track.confidence >= cfg.zoom.in_min_confidence
+                and self._as_tall_as_lately(track, hfov),
                 can_out=hfov < dome.hfov_wide * 0.99,
             )
             if step is not None:
@@ -236,6 +242,23 @@ class PtzController:
             predicted=(cx, cy),
         )
 
+    def _as_tall_as_lately(self, track: TrackInput, hfov: float) -> bool:
+        """Whether the box is at least `in_min_height_share` of the target's tallest in the
+        last `in_height_window_s` (heights over the focal length: a zoom step leaves them
+        be); without a window, always True. Called only for tracks confident enough to zoom
+        in on, so only their heights are remembered."""
+        zoom = self.config.zoom
+        if zoom.in_height_window_s <= 0:
+            return True
+        height = track.box.h / focal_length(self.frame_size[0], hfov)
+        heights = self._heights
+        if not heights or heights[-1][0] < track.capture_time:
+            heights.append((track.capture_time, height))
+        while heights and heights[0][0] < track.capture_time - zoom.in_height_window_s:
+            heights.popleft()
+        tallest = max((h for _, h in heights), default=height)
+        return height >= zoom.in_min_height_share * tallest
+
     def _feedforward(self, v_px_s: float, hfov: float, track: TrackInput) -> float:
         """The target's own angular rate (deg/s) from its image velocity, times the
         feed-forward gain; 0 below `feedforward_min_deg_s` (a standing person's jitter).
@@ -250,9 +273,8 @@ class PtzController:
             return 0.0
         if track.confidence < cfg.feedforward_min_confidence:
             return 0.0
-        # degrees per pixel at the view centre: 1/f radians, f = (W/2) / tan(hfov/2)
-        focal = self.frame_size[0] / 2 / math.tan(math.radians(hfov) / 2)
-        rate = math.degrees(v_px_s / focal)
+        # degrees per pixel at the view centre: 1/f radians
+        rate = math.degrees(v_px_s / focal_length(self.frame_size[0], hfov))
         if abs(rate) < cfg.feedforward_min_deg_s:
             return 0.0
         return cfg.feedforward * rate

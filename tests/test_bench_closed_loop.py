@@ -1,0 +1,31 @@
+"""bench/closed_loop.py's looser-annotation option: boxes scaled about their centres."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bench.closed_loop import cases, scale_boxes
+
+
+def test_scale_boxes_keeps_centres_and_clips_to_the_frame() -> None:
+    frames = {"0": [40, 20, 10, 40], "1": [0, 60, 10, 20]}
+    doc: dict[str, Any] = {"size": [100, 80], "fps": 10.0, "tracks": [{"id": 1, "frames": frames}]}
+    scaled = scale_boxes(doc, 1.5)
+    assert scaled["tracks"][0]["frames"]["0"] == [37.5, 10.0, 15.0, 60.0]  # centre (45, 40)
+    # at the corner: grown by half, then clipped to columns 0..100 and rows 0..80
+    assert scaled["tracks"][0]["frames"]["1"] == [0.0, 55.0, 12.5, 25.0]
+    assert doc["tracks"][0]["frames"]["0"] == [40, 20, 10, 40]  # the input is left alone
+
+
+def test_cases_play_scaled_copies_of_the_annotations(tmp_path: Path) -> None:
+    plain = [c for c in cases([]) if c[2] is not None]
+    if not plain:
+        pytest.skip("data/vtest.avi is not here (./scripts/fetch-vtest.sh)")
+    scaled = [c for c in cases([], 1.3, tmp_path) if c[2] is not None]
+    assert [c[0] for c in scaled] == [c[0] for c in plain]
+    assert all(Path(c[2] or "").parent == tmp_path for c in scaled)
+    with pytest.raises(ValueError, match="directory"):
+        cases([], 1.3)
