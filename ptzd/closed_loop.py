@@ -197,14 +197,20 @@ def zoom_position(sim: SimConfig, hfov: float) -> float:
     return min(1.0, max(0.0, math.log(magnification) / math.log(sim.zoom_ratio)))
 
 
+def fully_visible(gt: GroundTruth, track: int, frame: int) -> bool:
+    """Nothing of the walker hidden in this frame, per the scene's visibility map (a ground
+    truth without one counts as visible): whom an operator would pick, or a benchmark start
+    on. A walker behind a hedge has an amodal box of mostly hedge."""
+    return gt.visibility.get(track, {}).get(frame, 1.0) >= 0.99
+
+
 def _well_visible(gt: GroundTruth, track: int, frame: int) -> bool:
-    """Fully visible (per the scene's visibility, if any), inside the frame, not tiny."""
+    """Fully visible, inside the frame, not tiny."""
     x, y, w, h = gt.tracks[track][frame]
     width, height = gt.size
     margin = 0.02 * width
     inside = x >= margin and y >= 0 and x + w <= width - margin and y + h <= height
-    visible = gt.visibility.get(track, {}).get(frame, 1.0) >= 0.99
-    return inside and visible and h >= 0.05 * height
+    return inside and fully_visible(gt, track, frame) and h >= 0.05 * height
 
 
 def pick_walker(gt: GroundTruth) -> tuple[int, int]:

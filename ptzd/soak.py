@@ -46,10 +46,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from ptzd.closed_loop import in_central_cell
+from ptzd.closed_loop import fully_visible, in_central_cell
 from ptzd.errors import UsageError
 from ptzd.heap import malloc_stats
 from ptzd.pelco.codec import FrameParser, Motion
+from ptzd.sim.groundtruth import GroundTruth
+from ptzd.sim.sources import open_wide_source
 
 FAULTS = ("serial-reset", "stream-stall", "broker-restart")
 STALL_S = 6.0
@@ -59,6 +61,8 @@ WATCHDOG_USEC = 10_000_000  # pings every 5 s, as the shipped unit's WatchdogSec
 CAMERA = "soak"
 INIT_BOX = "290,170,60,140"  # until the first MQTT select: whatever is in the view centre
 RESELECT_S = 60.0
+RETRY_SELECT_S = 2.0  # no walker fit to select: look again this soon
+SCENE = "synthetic:0"
 _STATUS = re.compile(r"frames (\d+), dropped (\d+)")
 
 
@@ -558,6 +562,35 @@ def selection_centring(
     }
 
 
+def operator_choice(
+    record: Mapping[str, Any], truth: GroundTruth
+) -> tuple[str, list[float]] | None:
+    """Whom the soak's operator selects in a `groundtruth_view.jsonl` record: the walker with
+    the biggest box well inside the view (centre 80..560 px across, over 30 px tall) that
+    is fully visible in the wide scene (`truth`'s visibility at the record's video frame);
+    None if nobody is."""
+    wide_frame = int(record["video_frame"])  # already wrapped round the looping scene
+    boxes = {
+        walker: box
+        for walker, box in record.get("boxes", {}).items()
+        if box is not None
+        and 80 < box[0] + box[2] / 2 < 560
+        and box[3] > 30
+        and fully_visible(truth, int(walker), wide_frame)
+    }
+    if not boxes:
+        return None
+    return max(boxes.items(), key=lambda item: item[1][2] * item[1][3])
+
+
+def _scene_truth() -> GroundTruth:
+    """The soak scene's wide ground truth (boxes and visibility; a few seconds of CPU)."""
+    gt = open_wide_source(SCENE).ground_truth
+    if gt is None:  # a synthetic scene always has one
+        raise UsageError(f"{SCENE}: no ground truth")
+    return gt
+
+
 # --- the real-time soak ---------------------------------------------------------------------
 
 
@@ -599,10 +632,13 @@ class Soak:
         probe = self.dir / "probe.jsonl"
         probe.unlink(missing_ok=True)
         exit_code: int | None = None
+        # the scene's wide ground truth, for whom the operator can see (visibility per frame),
+        # worked out in a thread while the processes start
+        truth_task = asyncio.create_task(asyncio.to_thread(_scene_truth))
         try:
             sim = await _spawn(
                 [py, "-m", "ptzd", "--log-format", "json", "sim-camera", "--scene",
-                 "synthetic:0", "--serial", "tcp://127.0.0.1:0", "--http", "127.0.0.1:0",
+                 SCENE, "--serial", "tcp://127.0.0.1:0", "--http", "127.0.0.1:0",
                  "--loop", "--record", str(self.dir / "sim")],
                 sim_log,
             )  # fmt: skip
@@ -635,12 +671,15 @@ class Soak:
                 for i, name in enumerate(opts.faults)
             ]
             await self._wait_for(lambda: notify.ready, 60)
+            scene_truth = await truth_task
             next_sample = 0.0
             next_select = self.now()
             while self.now() < duration:
                 if self.now() >= next_select:  # the scenario: follow a new walker each minute
-                    await self._select(broker.port)
-                    next_select += RESELECT_S
+                    if await self._select(broker.port, scene_truth):
+                        next_select += RESELECT_S
+                    else:
+                        next_select = self.now() + RETRY_SELECT_S
                 if daemon.returncode is not None:
                     break
                 if schedule and self.now() >= schedule[0][0]:
@@ -659,6 +698,7 @@ class Soak:
                 exit_code = daemon.returncode
             await asyncio.sleep(0.3)  # the last STOP reaches the proxy
         finally:
+            truth_task.cancel()  # a no-op once it is done
             for task in tasks:
                 task.cancel()
             for child in (daemon, sim):
@@ -772,9 +812,15 @@ class Soak:
             }
         self.fault_log.append(entry)
 
-    async def _select(self, mqtt_port: int) -> None:
-        """Pick the biggest walker well inside the view (ground truth of the sim's latest
-        frame) and send `{"select": box}` over MQTT, as an operator would.
+    async def _select(self, mqtt_port: int, truth: GroundTruth) -> bool:
+        """Pick the biggest walker well inside the view and fully visible (ground truth of
+        the sim's latest frame; `truth`, the wide scene's, says who is hidden) and send
+        `{"select": box}` over MQTT, as an operator would; whether one was selected.
+
+        Fully visible: an operator draws the box on someone he can see. Picked by the size
+        of his ground-truth box alone, the soak selected walker 0 behind the hedge (30 of 51
+        selections in a 1-hour run, 0.14-0.40 of him visible), whose amodal box is mostly
+        hedge, and the tracker learnt the hedge.
 
         Only once the dome has stood still for `STILL_FRAMES` frames (or after
         `STILL_WAIT_S`): the box is from the simulator's newest frame and the daemon applies
@@ -791,14 +837,12 @@ class Soak:
             await asyncio.sleep(0.1)
             waited += 0.1
         record = _last_json_line(self.dir / "sim" / "groundtruth_view.jsonl")
-        boxes = {
-            walker: box
-            for walker, box in (record or {}).get("boxes", {}).items()
-            if box is not None and 80 < box[0] + box[2] / 2 < 560 and box[3] > 30
-        }
-        if not boxes or record is None:
-            return
-        walker, box = max(boxes.items(), key=lambda item: item[1][2] * item[1][3])
+        if record is None:
+            return False
+        choice = operator_choice(record, truth)
+        if choice is None:
+            return False
+        walker, box = choice
         with contextlib.suppress(aiomqtt.MqttError):
             async with aiomqtt.Client("127.0.0.1", mqtt_port, timeout=5) as client:
                 payload = json.dumps({"select": [round(v, 1) for v in box]})
@@ -807,6 +851,8 @@ class Soak:
                     {"t": round(self.now(), 2), "frame": record["frame"], "walker": walker,
                      "waited_s": round(waited, 1)}
                 )  # fmt: skip
+                return True
+        return False
 
     def _centring(self) -> dict[str, Any]:
         path = self.dir / "sim" / "groundtruth_view.jsonl"

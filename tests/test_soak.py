@@ -21,12 +21,14 @@ import numpy as np
 import pytest
 
 from ptzd.errors import UsageError
+from ptzd.sim.groundtruth import GroundTruth
 from ptzd.soak import (
     FAULTS,
     SoakOptions,
     _probe_loop,
     dome_still,
     draw_plots,
+    operator_choice,
     proc_sample,
     rss_trend,
     selection_centring,
@@ -237,6 +239,24 @@ def test_selection_centring_counts_only_while_the_walker_is_in_the_scene() -> No
     assert (first["frames"], first["in_view"], first["centred"]) == (10, 0.8, 0.6)
     assert (second["frames"], second["in_view"], second["centred"]) == (10, 0.0, 0.0)
     assert (result["frames"], result["in_view"], result["centred"]) == (20, 0.4, 0.3)
+
+
+def test_the_operator_selects_the_biggest_walker_he_can_see() -> None:
+    """Walker 1 is the biggest but behind a hedge at wide frame 7 (visibility 0.3): the
+    operator takes walker 2; at frame 8 walker 1 is in the open and is taken; walker 3 is
+    at the view's edge and too small, walker 4 has no visibility map (counted visible)."""
+    truth = GroundTruth((1000, 500), 25.0, tracks={}, visibility={1: {7: 0.3, 8: 1.0}, 2: {7: 1.0}})
+    boxes: dict[str, list[float] | None] = {
+        "1": [250.0, 100.0, 80.0, 200.0], "2": [300.0, 120.0, 40.0, 100.0],
+        "3": [600.0, 100.0, 20.0, 25.0], "4": [100.0, 200.0, 20.0, 40.0], "5": None,
+    }  # fmt: skip
+    record = {"frame": 1507, "video_frame": 7, "boxes": boxes}
+    assert operator_choice(record, truth) == ("2", boxes["2"])
+    assert operator_choice({**record, "video_frame": 8}, truth) == ("1", boxes["1"])
+    hidden = {**record, "boxes": {"1": boxes["1"], "3": boxes["3"]}}
+    assert operator_choice(hidden, truth) is None  # nobody fit: no selection this time
+    nobody_mapped = {**record, "boxes": {"4": boxes["4"]}}
+    assert operator_choice(nobody_mapped, truth) == ("4", boxes["4"])
 
 
 def test_dome_still_needs_the_same_pose_over_the_last_frames() -> None:
