@@ -215,6 +215,7 @@ class Daemon:
         self._zoom_layer = 0
         self._last_motion: Motion | None = None
         self._last_sent = -math.inf
+        self._frame_time: float | None = None  # capture time of the newest track item
         self._capture_task: asyncio.Task[None] | None = None
         self._mqtt_task: asyncio.Task[None] | None = None
         self._aux_tasks: list[asyncio.Task[None]] = []  # end with the pipeline (mqtt, systemd)
@@ -580,6 +581,7 @@ class Daemon:
                     next_tick = max(next_tick + period, now)
                 else:
                     latest = fresh
+                    self._frame_time = fresh.frame.capture_time
                     if self.controller is None:
                         self.controller = PtzController(ctl, fresh.frame.size)
                     if fresh.acquired is not None:
@@ -599,7 +601,9 @@ class Daemon:
         if self.controller is None:
             decision = ControlDecision(STOP, "idle")
         else:
-            decision = self.controller.update(_track_input(latest), now, pose.hfov)
+            decision = self.controller.update(
+                _track_input(latest), now, pose.hfov, self._frame_time
+            )
         if decision.mode == "stale" and self._last_motion != STOP:
             self.stats.stale_stops += 1
         if self._manual and latest is None:

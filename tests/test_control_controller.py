@@ -59,6 +59,19 @@ def test_a_stale_track_never_moves_the_camera() -> None:
     assert ctl.update(None, now=61.0, hfov=60.0).motion == STOP
 
 
+def test_stale_frames_stop_a_widening_dome_without_a_target() -> None:
+    # the stream stalls while the dome zooms out to find someone (seen in the CI soak's
+    # stream-stall fault: zoom OUT on the wire 3.4 s into a 6 s stall)
+    ctl = _controller(max_track_age_s=0.5, lost=LostConfig(widen_s=5.0))
+    ctl.go_home(10.0)
+    assert ctl.update(None, now=10.2, hfov=20.0, frame_time=10.1).mode == "widen"
+    stalled = ctl.update(None, now=10.7, hfov=25.0, frame_time=10.1)
+    assert stalled.motion == STOP and stalled.mode == "stale"
+    # frames again (widen_s not over): the widening resumes, and ends as before
+    assert ctl.update(None, now=12.0, hfov=25.0, frame_time=11.9).mode == "widen"
+    assert ctl.update(None, now=15.1, hfov=60.0, frame_time=15.0).mode == "idle"
+
+
 def test_lost_stops_holds_then_goes_home_once() -> None:
     ctl = _controller(lost=LostConfig(hold_s=2.0, home_preset=7))
     decisions = [

@@ -123,14 +123,23 @@ class PtzController:
         cfg = self.config
         return max(cfg.min_gain_scale, min(1.0, hfov / cfg.reference_hfov))
 
-    def update(self, track: TrackInput | None, now: float, hfov: float) -> ControlDecision:
-        """The command for time `now` given the latest track and the current horizontal FOV."""
+    def update(
+        self, track: TrackInput | None, now: float, hfov: float, frame_time: float | None = None
+    ) -> ControlDecision:
+        """The command for time `now` given the latest track and the current horizontal FOV.
+
+        `frame_time`: capture time of the newest frame the vision stage has seen, with or
+        without a target in it (None: unknown)."""
         dt = 0.0 if self._last_time is None else max(0.0, now - self._last_time)
         self._last_time = now
         cfg = self.config
         widening = now < self._widen_until
         if track is None:
             self._rest()
+            if frame_time is not None and now - frame_time > cfg.max_track_age_s:
+                # no target and no fresh frames either: a stream that stalls while the dome
+                # widens must not leave it zooming for the rest of widen_s
+                return ControlDecision(STOP, "stale")
             return ControlDecision(_WIDEN if widening else STOP, "widen" if widening else "idle")
         if now - track.capture_time > cfg.max_track_age_s:
             self._rest()
