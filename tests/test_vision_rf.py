@@ -242,3 +242,22 @@ def test_a_target_walking_on_behind_an_occluder_is_found_only_when_coasting(coas
         assert np.mean(late) > 0.5 and results[-1].state is TrackState.TRACKING
     else:
         assert np.mean(late) < 0.1  # the seed's search stays where the target vanished
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_box_follows_a_walker_going_away_only_with_the_scale_noise(seed: int) -> None:
+    # 1.2 % smaller a frame for 39 frames (0.62 x): the seed's +-0.64 px on w and h cannot
+    # keep up; a common log-scale factor per particle can
+    scene = Scene(growth=-0.012, start=(60.0, 60.0, 30.0, 80.0), velocity=(1.5, 0.3))
+    height_ratio = {}
+    for sigma_scale in (0.03, 0.0):
+        config = TrackerConfig(kind="rf", seed=seed, rf=RfConfig(sigma_scale=sigma_scale))
+        tracker = RfTracker(config)
+        tracker.init(_grey_scene(scene, 0), scene.truth(0))
+        for t in range(1, 40):
+            result = tracker.update(_grey_scene(scene, t))
+        assert result.state is TrackState.TRACKING
+        height_ratio[sigma_scale] = result.box[3] / scene.truth(39)[3]
+    assert height_ratio[0.03] < 1.4
+    assert height_ratio[0.0] > 1.5
+    assert height_ratio[0.0] - height_ratio[0.03] > 0.15

@@ -135,6 +135,28 @@ def test_lk_is_trusted_only_while_the_svm_agrees() -> None:
     assert modes == {0.8: Mode.PF, 0.0: Mode.LK}
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_particles_drift_with_the_target(seed: int) -> None:
+    # LK never trusted: every box is the PF's. A walker stepping 8 px a frame (a third of
+    # his width, over twice sigma_xy): the seed's random walk trails him, the drift does not
+    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0))
+    lags, velocities = {}, {}
+    for drift in (True, False):
+        svm = {"lk_min_confidence": 1.0, "velocity_drift": drift}
+        tracker = SvmTracker(TrackerConfig(kind="svm", seed=seed, svm=svm))
+        tracker.init(scene.frame(0), scene.truth(0))
+        lag = []
+        for t in range(1, 30):
+            result = tracker.update(scene.frame(t))
+            (x, _, w, _), (tx, _, tw, _) = result.box, scene.truth(t)
+            lag.append(tx + tw / 2 - (x + w / 2))
+        lags[drift] = float(np.mean(lag[5:]))
+        velocities[drift] = result.velocity[0]
+    assert abs(lags[True]) < 1.0
+    assert lags[False] > 1.5
+    assert velocities[True] == pytest.approx(8.0, abs=1.0)  # learned from confident frames
+
+
 def test_retrains_after_15_new_positives_and_tracks() -> None:
     scene = Scene()
     tracker = SvmTracker(TrackerConfig(kind="svm"))

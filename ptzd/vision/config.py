@@ -208,6 +208,10 @@ class RfConfig(StrictModel):
     top_particles: int = Field(default=15, ge=1, le=5000)
     sigma_xy: float = Field(default=6.4, ge=0.0, le=200.0)  # seed eq. 13
     sigma_wh: float = Field(default=0.64, ge=0.0, le=50.0)  # seed eq. 14
+    # Beyond the seed: each particle's size is the box's times exp(N(0, sigma_scale)), one
+    # factor for w and h (the aspect kept). The seed's +-0.64 px cannot follow a walker
+    # who halves his height going away (vtest.avi). 0 = the seed's sigma_wh on w and h.
+    sigma_scale: float = Field(default=0.03, ge=0.0, le=1.0)
     # Memory (seed sec. 4.3): 15 positives, 30 negatives, 5 early positives kept for good.
     positives: int = Field(default=15, ge=2, le=500)
     negatives: int = Field(default=30, ge=2, le=1000)
@@ -271,6 +275,9 @@ class SvmConfig(StrictModel):
     grid: int = Field(default=16, ge=4, le=64)
     sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)
     sigma_scale: float = Field(default=0.02, ge=0.0, le=1.0)
+    # Beyond the seed: the PF's particles drift by the target's velocity (learned from the
+    # frames with confidence > h2) before the random walk; false = the seed's random walk.
+    velocity_drift: bool = True
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

@@ -344,7 +344,8 @@ class RfTracker:
             self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
 
     def _predict(self, shape: tuple[int, ...]) -> None:
-        """Seed eqs. 12-14: centres drift by the floored mean of the last two velocities.
+        """Seed eqs. 12-14: centres drift by the floored mean of the last two velocities;
+        sizes by `sigma_scale` (ours) or the seed's `sigma_wh`.
 
         While coasting (occluded or lost, `RfConfig.coast`) the particles are drawn around
         the coasting box instead, with a spread that grows with the frames not tracked."""
@@ -356,7 +357,10 @@ class RfTracker:
             p[:, :2] = self._box[:2] + noise[:, :2] * self._search_sigma()
         else:
             p[:, :2] += ar2_drift(self._centres) + noise[:, :2] * rf.sigma_xy
-        p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
+        if rf.sigma_scale:
+            p[:, 2:] = self._box[2:] * np.exp(noise[:, 2:3] * rf.sigma_scale)
+        else:
+            p[:, 2:] = self._box[2:] + noise[:, 2:] * rf.sigma_wh
         p[:, 0] = np.clip(p[:, 0], 0, shape[1] - 1)
         p[:, 1] = np.clip(p[:, 1], 0, shape[0] - 1)
         np.maximum(p[:, 2:], _MIN_SIZE, out=p[:, 2:])
