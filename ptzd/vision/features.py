@@ -51,27 +51,29 @@ def to_bgr(frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.asarray(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR), dtype=np.uint8)
 
 
-def _neighbour(padded: NDArray[np.int16], k: int) -> NDArray[np.int16]:
+def _neighbour(padded: NDArray[np.uint8], k: int) -> NDArray[np.uint8]:
     dy, dx = NEIGHBOURS[k]
     h, w = padded.shape[0] - 2, padded.shape[1] - 2
-    out: NDArray[np.int16] = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+    out: NDArray[np.uint8] = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
     return out
 
 
-def ocs_lbp_maps(grey: GreyImage, threshold: float) -> NDArray[np.int32]:
+def ocs_lbp_maps(grey: GreyImage, threshold: float) -> NDArray[np.uint8]:
     """Per-pixel OCS-LBP magnitudes, H x W x 8 (seed 000 eqs. 5-6).
 
     For each centre-symmetric pair (n_i, n_{i+4}), i = 0..3, the difference d = n_i - n_{i+4}
     goes, when |d| > T, as magnitude |d| into orientation bin i (d > 0) or i + 4 (d < 0).
-    The border is replicated.
+    The border is replicated. Magnitudes are at most 255: uint8, which cv2.integral takes.
     """
-    padded = cv2.copyMakeBorder(grey, 1, 1, 1, 1, cv2.BORDER_REPLICATE).astype(np.int16)
-    maps = np.zeros((*grey.shape, ORIENTATIONS), np.int32)
+    padded = np.asarray(cv2.copyMakeBorder(grey, 1, 1, 1, 1, cv2.BORDER_REPLICATE), np.uint8)
+    channels: list[NDArray[np.uint8]] = [np.empty(0, np.uint8)] * ORIENTATIONS
     for i in range(ORIENTATIONS // 2):
-        d = _neighbour(padded, i) - _neighbour(padded, i + 4)
-        maps[..., i] = np.where(d > threshold, d, 0)
-        maps[..., i + 4] = np.where(-d > threshold, -d, 0)
-    return maps
+        a, b = _neighbour(padded, i), _neighbour(padded, i + 4)
+        # saturating uint8 subtraction: max(d, 0) and max(-d, 0); TOZERO keeps those > T
+        for k, positive in ((i, cv2.subtract(a, b)), (i + 4, cv2.subtract(b, a))):
+            kept = cv2.threshold(positive, threshold, 0, cv2.THRESH_TOZERO)[1]
+            channels[k] = np.asarray(kept, np.uint8)
+    return np.asarray(cv2.merge(channels), np.uint8).reshape(*grey.shape, ORIENTATIONS)
 
 
 def min_max(h: FloatArray) -> FloatArray:
@@ -127,9 +129,8 @@ class FeatureMaps:
             cv2.LUT(patch, levels), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=lid_bins
         )
         maps = ocs_lbp_maps(patch, ocs_threshold)
-        integral = np.zeros((maps.shape[0] + 1, maps.shape[1] + 1, ORIENTATIONS), np.int64)
-        integral[1:, 1:] = maps.cumsum(0).cumsum(1)
-        self._integral = integral
+        # int32 holds 255 x 2^23 pixels; OpenCV's integral is ~18x numpy's double cumsum
+        self._integral = np.asarray(cv2.integral(maps, sdepth=cv2.CV_32S), np.int32)
 
     def lid(self, boxes: FloatArray, samples: int) -> FloatArray:
         """Epanechnikov-weighted intensity histograms, N x 6 x lid_bins, each summing to 1.
@@ -210,7 +211,7 @@ def lbp_riu2(grey: GreyImage) -> NDArray[np.uint8]:
     A pattern is uniform when its circular bit string has at most two 0/1 transitions;
     its code is then its number of ones (neighbours >= centre).
     """
-    padded = cv2.copyMakeBorder(grey, 1, 1, 1, 1, cv2.BORDER_REPLICATE).astype(np.int16)
+    padded = np.asarray(cv2.copyMakeBorder(grey, 1, 1, 1, 1, cv2.BORDER_REPLICATE), np.uint8)
     centre = padded[1:-1, 1:-1]
     bits = [(_neighbour(padded, k) >= centre) for k in range(8)]
     ones = np.sum(bits, axis=0)
