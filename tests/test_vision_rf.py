@@ -46,6 +46,12 @@ def test_ocs_lbp_of_a_3x3_patch_by_hand() -> None:
     fig2 = np.full((3, 3), 100, np.uint8)
     fig2[1, 2], fig2[1, 0] = 130, 80
     assert ocs_lbp_maps(fig2, threshold=5)[1, 1].tolist() == [50, 0, 0, 0, 0, 0, 0, 0]
+    # the full range: 255 - 0 is a magnitude of 255, not a wrapped or clipped uint8
+    black_white = np.zeros((3, 3), np.uint8)
+    black_white[:, 2] = 255  # east column white: n0, n1, n7 = 255
+    maps = ocs_lbp_maps(black_white, threshold=5.5)
+    # n0 - n4 = +255 -> bin 0; n1 - n5 = +255 -> bin 1; n2 - n6 = 0; n3 - n7 = -255 -> bin 7
+    assert maps[1, 1].tolist() == [255, 255, 0, 0, 0, 0, 0, 255]
 
 
 def test_min_max_normalisation() -> None:
