@@ -10,7 +10,7 @@ time from a frame being rendered to its command being written (tracker included)
 machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
-        [--box-scale 1.3]
+        [--box-scale 1.3] [--thermal-seeds 0 1 2]
 
 `--box-scale F` plays the vtest cases with every annotated box (the initial one included)
 F times as wide and tall about its centre, clipped to the frame: how much the outcome hangs
@@ -42,13 +42,18 @@ VTEST = ROOT / "data" / "vtest.avi"
 
 
 def cases(
-    seeds: list[int], box_scale: float = 1.0, scaled_dir: Path | None = None
+    seeds: list[int],
+    box_scale: float = 1.0,
+    scaled_dir: Path | None = None,
+    thermal_seeds: tuple[int, ...] = (),
 ) -> list[tuple[str, str, str | None, int | None]]:
     """(name, source, ground truth, target) per case; with `box_scale` != 1 the vtest
-    annotations are written, boxes scaled, under `scaled_dir` and played from there."""
+    annotations are written, boxes scaled, under `scaled_dir` and played from there.
+    `thermal_seeds`: the same synthetic scenes seen by a thermal camera (`thermal:SEED`)."""
     out: list[tuple[str, str, str | None, int | None]] = [
         (f"synthetic:{s}", f"synthetic:{s}", None, None) for s in seeds
     ]
+    out += [(f"thermal:{s}", f"synthetic-thermal:{s}", None, None) for s in thermal_seeds]
     if VTEST.exists():
         for gt in sorted((ROOT / "bench" / "annotations").glob("vtest_*.json")):
             doc = json.loads(gt.read_text())
@@ -99,9 +104,10 @@ async def run_case(spec: str, gt: str | None, target: int | None, duration: floa
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per class of case (synthetic, vtest): runs, mean centred / in view, targets met."""
+    """Per class of case (synthetic, thermal, vtest): runs, mean centred / in view, targets
+    met."""
     out: dict[str, dict[str, Any]] = {}
-    for kind in ("synthetic", "vtest"):
+    for kind in ("synthetic", "thermal", "vtest"):
         mine = [r for r in rows if r["case"].startswith(kind)]
         if not mine:
             continue
@@ -146,6 +152,14 @@ def main() -> None:
     parser.add_argument("--record", type=Path, help="keep each run's records under this dir")
     parser.add_argument("--tracker-seeds", type=int, nargs="*", default=[0])
     parser.add_argument(
+        "--thermal-seeds",
+        type=int,
+        nargs="*",
+        default=[],
+        help="also these synthetic scenes as a thermal camera sees them (for --override "
+        '\'{"tracker": {"kind": "rf"}}\')',
+    )
+    parser.add_argument(
         "--override",
         type=json.loads,
         default={},
@@ -163,7 +177,8 @@ def main() -> None:
         rows = [
             run_row(name, spec, gt, target, tracker_seed, args)
             for (name, spec, gt, target), tracker_seed in itertools.product(
-                cases(args.seeds, args.box_scale, Path(scaled_dir)), args.tracker_seeds
+                cases(args.seeds, args.box_scale, Path(scaled_dir), tuple(args.thermal_seeds)),
+                args.tracker_seeds,
             )
         ]
     header = f"{'case':<14}{'tseed':>6}{'frames':>7}{'centred':>9}{'in view':>9}{'size err':>9}"

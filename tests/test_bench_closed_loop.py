@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from bench.closed_loop import cases, scale_boxes
+from bench.closed_loop import cases, scale_boxes, summarise
 
 
 def test_scale_boxes_keeps_centres_and_clips_to_the_frame() -> None:
@@ -29,3 +29,16 @@ def test_cases_play_scaled_copies_of_the_annotations(tmp_path: Path) -> None:
     assert all(Path(c[2] or "").parent == tmp_path for c in scaled)
     with pytest.raises(ValueError, match="directory"):
         cases([], 1.3)
+
+
+def test_thermal_cases_are_their_own_class() -> None:
+    listed = cases([1], thermal_seeds=(3,))
+    assert listed[:2] == [
+        ("synthetic:1", "synthetic:1", None, None),
+        ("thermal:3", "synthetic-thermal:3", None, None),
+    ]
+    rows = [{"case": "synthetic:1", "centred": 1.0, "in_view": 1.0},
+            {"case": "thermal:3", "centred": 0.5, "in_view": 1.0}]  # fmt: skip
+    summary = summarise(rows)
+    assert summary["synthetic"]["met"] == 1 and summary["synthetic"]["runs"] == 1
+    assert summary["thermal"] == {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
