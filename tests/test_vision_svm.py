@@ -22,6 +22,7 @@ from ptzd.vision.svm import (
     platt_fit,
     platt_probability,
 )
+from ptzd.vision.tracking import TrackState
 from tests.vision_helpers import Scene, draw_person, iou
 
 REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
@@ -155,6 +156,18 @@ def test_particles_drift_with_the_target(seed: int) -> None:
     assert abs(lags[True]) < 1.0
     assert lags[False] > 1.5
     assert velocities[True] == pytest.approx(8.0, abs=1.0)  # learned from confident frames
+
+
+def test_a_held_box_reports_no_motion_and_the_drift_resumes_after() -> None:
+    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15)
+    tracker = SvmTracker(TrackerConfig(kind="svm"))
+    tracker.init(scene.frame(0), scene.truth(0))
+    results = [tracker.update(scene.frame(t)) for t in range(1, 22)]
+    assert results[14].state is TrackState.TRACKING and results[14].velocity[0] > 6.0
+    hidden = results[16:]
+    assert all(r.state is not TrackState.TRACKING for r in hidden)
+    assert all(r.velocity == (0.0, 0.0) and r.box == hidden[0].box for r in hidden)
+    assert tracker._velocity[0] > 6.0  # kept for the particles when he turns up again
 
 
 def test_retrains_after_15_new_positives_and_tracks() -> None:

@@ -379,9 +379,11 @@ class SvmTracker:
 
     def _result(self) -> TrackResult:
         cx, cy, w, h = (float(v) for v in self._box)
+        # the box is held while the target is not tracked: so is what it reports moving
+        vx, vy = self._velocity if self._state is TrackState.TRACKING else (0.0, 0.0)
         return TrackResult(
             box=(cx - w / 2, cy - h / 2, w, h),
             state=self._state,
             confidence=float(np.clip(self._confidence, 0.0, 1.0)),
-            velocity=(float(self._velocity[0]), float(self._velocity[1])),
+            velocity=(float(vx), float(vy)),
         )
