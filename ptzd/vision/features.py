@@ -66,13 +66,19 @@ def ocs_lbp_maps(grey: GreyImage, threshold: float) -> NDArray[np.uint8]:
     The border is replicated. Magnitudes are at most 255: uint8, which cv2.integral takes.
     """
     padded = np.asarray(cv2.copyMakeBorder(grey, 1, 1, 1, 1, cv2.BORDER_REPLICATE), np.uint8)
-    channels: list[NDArray[np.uint8]] = [np.empty(0, np.uint8)] * ORIENTATIONS
-    for i in range(ORIENTATIONS // 2):
-        a, b = _neighbour(padded, i), _neighbour(padded, i + 4)
-        # saturating uint8 subtraction: max(d, 0) and max(-d, 0); TOZERO keeps those > T
-        for k, positive in ((i, cv2.subtract(a, b)), (i + 4, cv2.subtract(b, a))):
-            kept = cv2.threshold(positive, threshold, 0, cv2.THRESH_TOZERO)[1]
-            channels[k] = np.asarray(kept, np.uint8)
+    half = ORIENTATIONS // 2
+    # bin i takes d > 0 and bin i + 4 takes d < 0: saturating uint8 subtraction of the pair
+    # one way or the other gives max(d, 0) or max(-d, 0); TOZERO keeps the values above T
+    pairs = [(i, i + half) for i in range(half)] + [(i + half, i) for i in range(half)]
+    channels = [
+        cv2.threshold(
+            cv2.subtract(_neighbour(padded, a), _neighbour(padded, b)),
+            threshold,
+            0,
+            cv2.THRESH_TOZERO,
+        )[1]
+        for a, b in pairs
+    ]
     return np.asarray(cv2.merge(channels), np.uint8).reshape(*grey.shape, ORIENTATIONS)
 
 
