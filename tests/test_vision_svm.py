@@ -79,12 +79,15 @@ def test_svm_model_scores_positives_above_negatives() -> None:
     assert np.all(p[:5] > 0.5) and np.all(p[5:] < 0.5)
 
 
-def test_lucas_kanade_recovers_a_shift() -> None:
-    rng = np.random.default_rng(0)
-    noise = rng.integers(0, 256, (240, 320)).astype(np.uint8)
+def _textured(seed: int) -> np.ndarray:
+    noise = np.random.default_rng(seed).integers(0, 256, (240, 320)).astype(np.uint8)
     blurred = cv2.GaussianBlur(noise, (0, 0), 3).astype(np.float64)
     span = blurred.max() - blurred.min()
-    textured = ((blurred - blurred.min()) * 255 / span).astype(np.uint8)
+    return np.asarray((blurred - blurred.min()) * 255 / span, np.uint8)
+
+
+def test_lucas_kanade_recovers_a_shift() -> None:
+    textured = _textured(0)
     box = np.array([100.0, 100.0, 40.0, 60.0])
     lk = LucasKanade(size=32, iterations=30)
     lk.set_template(textured, box)
@@ -98,6 +101,31 @@ def test_lucas_kanade_recovers_a_shift() -> None:
     lk.set_template(grey, np.array([x + w / 2, y + h / 2, w, h]))
     lk.track(np.roll(grey, (3, 4), axis=(0, 1)))
     assert lk.box()[:2] == pytest.approx([x + w / 2 + 4, y + h / 2 + 3], abs=1.0)
+
+
+@pytest.mark.parametrize("motion", ["affine", "scale", "translation"])
+def test_lucas_kanade_motion_models(motion: str) -> None:
+    """Each motion model recovers what it can represent and nothing else: the frame is
+    the template's texture stretched 8 % wider and 4 % taller about the box centre."""
+    image = _textured(1)
+    box = np.array([160.0, 120.0, 40.0, 60.0])
+    stretch = np.array([[1.08, 0.0, 0.0], [0.0, 1.04, 0.0], [0.0, 0.0, 1.0]])
+    about = np.array([[1.0, 0.0, 160.0], [0.0, 1.0, 120.0], [0.0, 0.0, 1.0]])
+    warp = about @ stretch @ np.linalg.inv(about)
+    moved = np.asarray(cv2.warpAffine(image, warp[:2], (320, 240)), np.uint8)
+    lk = LucasKanade(size=32, iterations=50, motion=motion)
+    lk.set_template(image, box)
+    lk.track(moved)
+    cx, cy, w, h = lk.box()
+    assert (cx, cy) == pytest.approx((160.0, 120.0), abs=0.5)
+    if motion == "affine":
+        assert (w, h) == pytest.approx((40 * 1.08, 60 * 1.04), abs=0.3)
+    elif motion == "scale":
+        # one factor between the two stretches, the template's aspect kept
+        assert 1.04 < w / 40 < 1.08
+        assert w / h == pytest.approx(40 / 60, abs=1e-9)
+    else:
+        assert (w, h) == pytest.approx((40.0, 60.0), abs=1e-9)
 
 
 def test_switches_from_lk_to_pf_and_back() -> None:

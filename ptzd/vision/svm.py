@@ -126,11 +126,16 @@ class SvmModel:
 
 
 class LucasKanade:
-    """Inverse-compositional affine Lucas-Kanade on a small grey template (seed eq. 10)."""
+    """Inverse-compositional Lucas-Kanade on a small grey template (seed eq. 10).
 
-    def __init__(self, size: int, iterations: int) -> None:
+    `motion` picks the warp: "affine" (the seed's six parameters), "scale" (a scale factor
+    and a shift: the template's aspect is kept) or "translation".
+    """
+
+    def __init__(self, size: int, iterations: int, motion: str = "affine") -> None:
         self._size = size
         self._iterations = iterations
+        self._motion = motion
         self._template: FloatArray = np.zeros((1, 1))
         self._sd: FloatArray = np.zeros((1, 6))
         self._hessian_inv: FloatArray = np.eye(6)
@@ -151,8 +156,14 @@ class LucasKanade:
         gy, gx = (np.asarray(g, dtype=np.float64) for g in np.gradient(self._template))
         v, u = np.mgrid[0:th, 0:tw].astype(np.float64)
         gx, gy, u, v = gx.ravel(), gy.ravel(), u.ravel(), v.ravel()
-        self._sd = np.column_stack([gx * u, gy * u, gx * v, gy * v, gx, gy])
-        hessian = self._sd.T @ self._sd + np.eye(6) * 1e-6
+        if self._motion == "affine":
+            self._sd = np.column_stack([gx * u, gy * u, gx * v, gy * v, gx, gy])
+        elif self._motion == "scale":
+            self._sd = np.column_stack([gx * u + gy * v, gx, gy])
+        else:
+            self._sd = np.column_stack([gx, gy])
+        k = self._sd.shape[1]
+        hessian = self._sd.T @ self._sd + np.eye(k) * 1e-6
         self._hessian_inv = np.asarray(np.linalg.inv(hessian), dtype=np.float64)
         self._variance = max(float(self._template.var()), 1.0)
 
@@ -174,6 +185,10 @@ class LucasKanade:
         for _ in range(self._iterations):
             residual = (self._sample(grey, (tw, th)) - self._template).ravel()
             dp = self._hessian_inv @ (self._sd.T @ residual)
+            if dp.shape[0] == 3:
+                dp = np.array([dp[0], 0.0, 0.0, dp[0], dp[1], dp[2]])
+            elif dp.shape[0] == 2:
+                dp = np.array([0.0, 0.0, 0.0, 0.0, dp[0], dp[1]])
             delta = np.array([[1 + dp[0], dp[2], dp[4]], [dp[1], 1 + dp[3], dp[5]], [0, 0, 1.0]])
             self.warp = self.warp @ np.linalg.inv(delta)
             if float(np.abs(dp[4:]).max()) < 0.01 and float(np.abs(dp[:4]).max()) < 1e-4:
@@ -197,7 +212,9 @@ class SvmTracker:
         self._config = config
         self._svm_config: SvmConfig = config.svm
         self.model = SvmModel(config.svm.svm_c)
-        self.lk = LucasKanade(config.svm.template_size, config.svm.lk_iterations)
+        self.lk = LucasKanade(
+            config.svm.template_size, config.svm.lk_iterations, config.svm.lk_motion
+        )
         self._rng = np.random.default_rng(config.seed)
         self._box: FloatArray = np.zeros(4)
         self._reference: FloatArray = np.ones(2)  # init (w, h), rescaled on zoom
