@@ -213,6 +213,14 @@ def _well_visible(gt: GroundTruth, track: int, frame: int) -> bool:
     return inside and fully_visible(gt, track, frame) and h >= 0.05 * height
 
 
+def first_well_visible(gt: GroundTruth, track: int) -> int:
+    """The first frame in which the walker is fully visible, inside the frame and not tiny."""
+    start = next((f for f in sorted(gt.tracks[track]) if _well_visible(gt, track, f)), None)
+    if start is None:
+        raise UsageError(f"--target {track}: the walker is never fully in view")
+    return start
+
+
 def pick_walker(gt: GroundTruth) -> tuple[int, int]:
     """The synthetic scene's walker to follow and the frame to start at: the walker with the
     most frames left after it is first fully in view (ties: the earliest start)."""
@@ -341,6 +349,10 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
         if target not in gt.tracks or not gt.tracks[target]:
             raise UsageError(f"--target {target}: no such track in the ground truth")
         first = min(gt.tracks[target])
+        if options.gt_path is None:
+            # a synthetic scene's walker enters at the wide image's edge or from behind
+            # something; like an operator, start on him once he is well in view
+            first = first_well_visible(gt, target)
     else:
         target, first = pick_walker(gt)
     frames = gt.tracks[target]

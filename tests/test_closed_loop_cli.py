@@ -91,3 +91,25 @@ def test_sim_can_start_at_the_widest_pointed_at_the_target(tmp_path: Path) -> No
     assert box[3] < 480 / 6  # a small figure at the widest
     near, box = first_view()
     assert near["hfov"] < 40.0 and box[3] == pytest.approx(480 / 3, rel=0.1)
+
+
+def test_a_named_synthetic_walker_is_taken_up_once_fully_in_view(tmp_path: Path) -> None:
+    """Synthetic:0's walker 4 enters at the wide image's bottom edge (his first box is a
+    sliver of his head); `--target 4` starts where he is first well in view, as an operator
+    would select him."""
+    from ptzd.closed_loop import first_well_visible, fully_visible
+    from ptzd.sim.sources import open_wide_source
+
+    gt = open_wide_source("synthetic:0").ground_truth
+    assert gt is not None
+    start = first_well_visible(gt, 4)
+    assert start > min(gt.tracks[4]) and fully_visible(gt, 4, start)
+    rec = tmp_path / "rec"
+    proc = subprocess.run(
+        [sys.executable, "-m", "ptzd", "sim", "--scene", "synthetic:0", "--target", "4",
+         "--duration", "0.2", "--virtual-clock", "--record", str(rec)],
+        capture_output=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr.decode()[-2000:]
+    first = json.loads((rec / "camera.jsonl").read_text().splitlines()[0])
+    assert first["video_frame"] == start
