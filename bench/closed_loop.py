@@ -10,7 +10,11 @@ time from a frame being rendered to its command being written (tracker included)
 machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
-        [--box-scale 1.3] [--thermal-seeds 0 1 2]
+        [--box-scale 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0]
+
+`--walkers-of SEED` adds every walker of synthetic:SEED seen for at least 4 s, each
+followed from the frame in which he is first well in view (`ptzd sim --target ID`): the
+population an operator picks from in the soak, deterministic and in process.
 
 `--box-scale F` plays the vtest cases with every annotated box (the initial one included)
 F times as wide and tall about its centre, clipped to the frame: how much the outcome hangs
@@ -39,6 +43,8 @@ from ptzd.config import validate_config
 
 ROOT = Path(__file__).resolve().parents[1]
 VTEST = ROOT / "data" / "vtest.avi"
+# `--walkers-of`: walkers seen for less than this many frames (4 s at 25 fps) are left out
+WALKER_MIN_FRAMES = 100
 
 
 def cases(
@@ -64,6 +70,30 @@ def cases(
                 gt.write_text(json.dumps(scale_boxes(doc, box_scale)))
             for track in doc["tracks"]:
                 out.append((f"vtest#{track['id']}", str(VTEST), str(gt), int(track["id"])))
+    return out
+
+
+def walker_cases(
+    seeds: list[int], min_frames: int = WALKER_MIN_FRAMES
+) -> list[tuple[str, str, None, int]]:
+    """Every walker of each synthetic scene who stays at least `min_frames` frames after he
+    is first well in view (`walker:SEED/ID`): whom an operator could pick, as the soak's does,
+    rather than the one walker `pick_walker` chooses."""
+    from ptzd.closed_loop import first_well_visible
+    from ptzd.errors import UsageError
+    from ptzd.sim.sources import open_wide_source
+
+    out: list[tuple[str, str, None, int]] = []
+    for seed in seeds:
+        gt = open_wide_source(f"synthetic:{seed}").ground_truth
+        assert gt is not None  # a synthetic scene carries its ground truth
+        for tid, frames in sorted(gt.tracks.items()):
+            try:
+                start = first_well_visible(gt, tid)
+            except UsageError:
+                continue
+            if sum(1 for f in frames if f >= start) >= min_frames:
+                out.append((f"walker:{seed}/{tid}", f"synthetic:{seed}", None, tid))
     return out
 
 
@@ -104,10 +134,10 @@ async def run_case(spec: str, gt: str | None, target: int | None, duration: floa
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per class of case (synthetic, thermal, vtest): runs, mean centred / in view, targets
+    """Per class of case (synthetic, thermal, walker, vtest): runs, mean centred / in view, targets
     met."""
     out: dict[str, dict[str, Any]] = {}
-    for kind in ("synthetic", "thermal", "vtest"):
+    for kind in ("synthetic", "thermal", "walker", "vtest"):
         mine = [r for r in rows if r["case"].startswith(kind)]
         if not mine:
             continue
@@ -160,6 +190,15 @@ def main() -> None:
         '\'{"tracker": {"kind": "rf"}}\')',
     )
     parser.add_argument(
+        "--walkers-of",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="SEED",
+        help="also every walker of these synthetic scenes seen for at least "
+        f"{WALKER_MIN_FRAMES} frames (cases walker:SEED/ID, a class of their own)",
+    )
+    parser.add_argument(
         "--override",
         type=json.loads,
         default={},
@@ -177,7 +216,8 @@ def main() -> None:
         rows = [
             run_row(name, spec, gt, target, tracker_seed, args)
             for (name, spec, gt, target), tracker_seed in itertools.product(
-                cases(args.seeds, args.box_scale, Path(scaled_dir), tuple(args.thermal_seeds)),
+                cases(args.seeds, args.box_scale, Path(scaled_dir), tuple(args.thermal_seeds))
+                + walker_cases(args.walkers_of),
                 args.tracker_seeds,
             )
         ]

@@ -42,3 +42,28 @@ def test_thermal_cases_are_their_own_class() -> None:
     summary = summarise(rows)
     assert summary["synthetic"]["met"] == 1 and summary["synthetic"]["runs"] == 1
     assert summary["thermal"] == {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
+
+
+def test_walker_cases_are_the_walkers_seen_long_enough() -> None:
+    from bench.closed_loop import walker_cases
+    from ptzd.closed_loop import first_well_visible
+    from ptzd.errors import UsageError
+    from ptzd.sim.sources import open_wide_source
+
+    gt = open_wide_source("synthetic:0").ground_truth
+    assert gt is not None
+    listed = walker_cases([0], min_frames=100)
+    ids = {target for _, _, _, target in listed}
+    assert all(spec == "synthetic:0" and truth is None for _, spec, truth, _ in listed)
+    assert [name for name, *_ in listed] == [f"walker:0/{t}" for t in sorted(ids)]
+    for tid, frames in gt.tracks.items():
+        try:
+            left = sum(1 for f in frames if f >= first_well_visible(gt, tid))
+        except UsageError:
+            left = 0  # never well in view
+        assert (tid in ids) == (left >= 100), tid
+    assert len(ids) > 20 and len(walker_cases([0], min_frames=400)) < len(ids)
+    rows = [{"case": "walker:0/4", "centred": 0.5, "in_view": 1.0}]
+    assert summarise(rows) == {
+        "walker": {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
+    }
