@@ -410,3 +410,68 @@ def test_a_detection_re_identifies_the_target_only_on_a_match_in_every_part(
     assert tracker.resembles(_impostor_frame(8, 10, 13, 40), target)
     impostor = (100.0, 80.0, 24.0, 60.0)  # t = 20: same trousers, green top
     assert tracker.resembles(_impostor_frame(20, 10, 13, 40), impostor) is (threshold == 0.0)
+
+
+def _still_look_alike_frame(t: int, target_until: int) -> np.ndarray:
+    """The target walks right and is gone from `target_until`; a painted figure in its
+    colours stands 26 px ahead of where it vanishes the whole time."""
+    from tests.vision_helpers import background, draw_person
+
+    img = background(320, 240, 0)[:240, :320].copy()
+    draw_person(img, (130.0, 80.0, 24.0, 60.0), (40, 40, 200), (160, 60, 20))
+    if t < target_until:
+        draw_person(img, (60.0 + 2.0 * t, 80.0, 24.0, 60.0), (40, 40, 200), (160, 60, 20))
+    return img
+
+
+@pytest.mark.parametrize("needs_motion", [True, False])
+def test_an_occlusion_ends_only_where_something_moved(needs_motion: bool) -> None:
+    config = TrackerConfig.model_validate({"occlusion": {"return_needs_motion": needs_motion}})
+    tracker = make_tracker(config)
+    tracker.init(_still_look_alike_frame(0, 10), (60.0, 80.0, 24.0, 60.0))
+    results = [tracker.update(_still_look_alike_frame(t, 10)) for t in range(1, 45)]
+    assert {r.state for r in results[:9]} == {TrackState.TRACKING}
+    after = [r.state for r in results[10:]]  # t = 11..44: only the still figure is there
+    if needs_motion:
+        # the occlusion does not end on it; the tracker gives up after max_frames (while
+        # lost nothing asks for motion: a target found again may be standing)
+        assert TrackState.LOST in after
+        assert set(after[: after.index(TrackState.LOST)]) == {TrackState.OCCLUDED}
+    else:
+        # in the target's colours, right where the coast goes: taken for the target
+        assert results[-1].state is TrackState.TRACKING
+        assert iou(results[-1].box, (130.0, 80.0, 24.0, 60.0)) > 0.5
+
+
+def _hedge_frame(t: int) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The target walks right; from t = 10 a hedge hides its lower half, and behind it, at
+    t = 20, it turns and walks back left. Returns the frame and the target's box."""
+    from tests.vision_helpers import background, draw_person
+
+    img = background(320, 240, 0)[:240, :320].copy()
+    x = 60.0 + 2.0 * min(t, 20) - 2.0 * max(t - 20, 0)
+    box = (x, 80.0, 24.0, 60.0)
+    draw_person(img, box, (40, 40, 200), (160, 60, 20))
+    if t >= 10:
+        img[112:, :] = (70, 110, 60)  # the hedge, from a little below the waist
+    return img, box
+
+
+@pytest.mark.parametrize("threshold", [0.75, 0.0])
+def test_an_occluded_target_s_visible_half_is_followed(threshold: float) -> None:
+    occlusion = {"follow_part_threshold": threshold, "return_needs_motion": True}
+    tracker = make_tracker(TrackerConfig.model_validate({"occlusion": occlusion}))
+    tracker.init(_hedge_frame(0)[0], _hedge_frame(0)[1])
+    results = [(tracker.update(_hedge_frame(t)[0]), _hedge_frame(t)[1]) for t in range(1, 70)]
+    states = {r.state for r, _ in results[15:]}
+    last, truth = results[-1]
+    centre_error = abs(last.box[0] + last.box[2] / 2 - (truth[0] + truth[2] / 2))
+    if threshold:
+        # half a match never ends the occlusion, but the box stays on that half and the
+        # tracker does not give up on it
+        assert states == {TrackState.OCCLUDED}
+        assert centre_error < 6.0
+    else:
+        # the coast walks on to the right, and the tracker gives up
+        assert TrackState.LOST in states
+        assert centre_error > 40.0

@@ -140,6 +140,17 @@ class OcclusionConfig(StrictModel):
     # coming out from behind someone in vtest.avi (vtest#3 failed for 2 of 3 tracker
     # seeds); the stillness test below catches the edge instead (docs/daemon.md).
     recover_share: float = Field(default=0.0, ge=0.0, le=1.0)
+    # Beyond the seed: an occluded target is back only where something moved (the stillness
+    # test's moving fraction, `stillness.min_moving_fraction`): a person coming out from
+    # behind something is walking; a hedge or pavement in his colours is not. (A lost one
+    # may be found standing; the search there already prefers boxes in which something moved.)
+    return_needs_motion: bool = True
+    # Beyond the seed: while OCCLUDED, a candidate whose top part (`color.parts` >= 2)
+    # matches at least this, with something moving in it, is the target's upper half (above
+    # a hedge, a bench, a car): the box follows it instead of coasting, nothing is learned,
+    # and the count towards LOST waits. The top only: a passer-by in the same trousers
+    # matched the bottom part and was followed off the target (docs/tracking.md). 0: off.
+    follow_part_threshold: float = Field(default=0.75, ge=0.0, le=1.0)
     # Beyond the seed, an occluder edge: a target whose similarity sits between
     # similarity_threshold and reacquire_threshold, whose box moved at its learned speed and
     # then nearly stopped within 4 frames, falling `stall_lag` box widths behind, is taken

@@ -142,6 +142,7 @@ class ParticleTracker:
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold) if still.still_frames else None
         self._still_frames = 0  # consecutive frames in which the box did not move
+        self._candidate_moved = True  # something moved in the last candidate box (or unknown)
         self._initialised = False
         self.resampled = False  # whether the last update resampled (for tests and debugging)
 
@@ -180,6 +181,7 @@ class ParticleTracker:
         self._reacquire_hits = 0
         self._confidence = 1.0
         self._still_frames = 0
+        self._candidate_moved = True
         if self._motion is not None:
             self._motion.reset(frame)
         self._initialised = True
@@ -233,7 +235,9 @@ class ParticleTracker:
             self._box[:2] = ahead
         elif self._stalled and sim < self._config.occlusion.reacquire_threshold:
             sim = 0.0  # still behind the look-alike: only a clean match ends it
-        self._transition(sim, weakest)
+        # half of him is in view (his top above a hedge): the box follows that half
+        follows_part = self._shows_a_part(parts)
+        self._transition(sim, weakest, follows_part)
         if self._state is not TrackState.OCCLUDED:
             self._stalled = False
         if self._state is TrackState.TRACKING:
@@ -250,7 +254,12 @@ class ParticleTracker:
             if self._reacquire_hits:
                 # a candidate matched: gather the cloud on it to confirm next frame
                 self._resample()
-            self._coast()
+            if follows_part and self._state is TrackState.OCCLUDED:
+                # learn nothing; the cloud gathers on the visible half
+                self._resample()
+                self._box[:2] = candidate[:2]
+            else:
+                self._coast()
         self._centres.append(self._box[:2].copy())
         return self._result()
 
@@ -405,12 +414,15 @@ class ParticleTracker:
         state: FloatArray = w @ p
         return state[[X, Y, W, H]]
 
-    def _transition(self, similarity: float, weakest_part: float) -> None:
+    def _transition(self, similarity: float, weakest_part: float, follows_part: bool) -> None:
         """The state after a frame whose candidate scored `similarity` (the mean of its
-        parts) and `weakest_part` (their minimum)."""
+        parts) and `weakest_part` (their minimum); `follows_part`: an occluded target's
+        visible part is in view (the count towards LOST waits)."""
         occ = self._config.occlusion
         if self._state is TrackState.LOST:
             self._lost_frames += 1
+            # (no motion asked here: the search already prefers boxes in which something
+            # moved, and a target found again may be standing still)
             whole = weakest_part >= occ.part_threshold
             if occ.reacquire and similarity >= occ.reacquire_threshold and whole:
                 self._reacquire_hits += 1
@@ -423,23 +435,42 @@ class ParticleTracker:
                 self._reacquire_hits = 0
             return
         # what comes back from an occlusion must match in every part, not on average
-        whole = self._state is not TrackState.OCCLUDED or weakest_part >= occ.part_threshold
+        whole = self._state is not TrackState.OCCLUDED or (
+            weakest_part >= occ.part_threshold and self._moved_enough()
+        )
         if similarity >= self._back_threshold() and whole:
             self._state = TrackState.TRACKING
             self._occluded_frames = 0
             return
         # seed occlusion handler: no resampling, count, give up after max_frames
-        self._occluded_frames += 1
+        if not follows_part:
+            self._occluded_frames += 1
         self._state = (
             TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
         )
+
+    def _shows_a_part(self, parts: FloatArray) -> bool:
+        """OCCLUDED, and the candidate is a visible part of the target (see
+        OcclusionConfig.follow_part_threshold)."""
+        threshold = self._config.occlusion.follow_part_threshold
+        if not threshold or self._state is not TrackState.OCCLUDED or self._stalled:
+            return False
+        if len(parts) < 2:
+            return False  # a one-part model has no upper half
+        return bool(float(parts[0]) >= threshold and self._candidate_moved)
+
+    def _moved_enough(self) -> bool:
+        """Whether the candidate may end an occlusion as far as motion goes."""
+        return self._candidate_moved or not self._config.occlusion.return_needs_motion
 
     def _box_is_still(self, box: FloatArray) -> bool:
         """Count the frames in which `box` did not move; whether there were `still_frames`."""
         still = self._config.stillness
         moved = None if self._motion is None else self._motion.moving_fraction(box)
         if moved is None:
+            self._candidate_moved = True
             return False
+        self._candidate_moved = bool(moved[0] >= still.min_moving_fraction)
         if moved[0] < still.min_moving_fraction:
             self._still_frames += 1
         else:
