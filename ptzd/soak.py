@@ -20,8 +20,12 @@ there is no separate process to break) and the same leak checks (`virtual_report
 Faults, each with its expected recovery (checked, see docs/reliability.md):
 - `serial-reset`: every proxied serial connection is reset (TCP RST) and the port refuses
   connections for 2 s. Expect a reconnect whose first two commands are STOP, STOP.
-- `stream-stall`: the sim-camera process is frozen (SIGSTOP) for 6 s. Expect a STOP on the
-  wire within `max_track_age_s` + 1 s, the watchdog to stop being fed, and frames to resume.
+- `stream-stall`: the sim-camera's MJPEG stream stops for 6 s (SIGUSR1, SIGUSR2 resumes
+  it) while its dome goes on taking commands, as a real dome's controller does when its
+  video stalls. Expect a STOP on the wire within `max_track_age_s` + 1 s, the watchdog to
+  stop being fed, and frames to resume. (Until 2026-12-03 the whole process was frozen with
+  SIGSTOP; that froze the dome's serial line too, and on SIGCONT the simulated dome applied
+  6 s of its last speed at once: a dome thrown 56 deg off, staring at the ground.)
 - `broker-restart`: mosquitto is killed (SIGKILL) and restarted 2 s later on the same port.
   Expect `availability` = `online` (retained) to be republished.
 """
@@ -704,7 +708,6 @@ class Soak:
             for child in (daemon, sim):
                 if child is not None and child.returncode is None:
                     with contextlib.suppress(ProcessLookupError):
-                        child.send_signal(signal.SIGCONT)
                         child.terminate()
                     with contextlib.suppress(TimeoutError):
                         async with asyncio.timeout(10):
@@ -776,13 +779,13 @@ class Soak:
         elif name == "stream-stall":
             pings_before = len(notify.pings)
             frames_before = notify.frames
-            sim.send_signal(signal.SIGSTOP)
+            sim.send_signal(signal.SIGUSR1)  # the stream stalls; the dome goes on
             await asyncio.sleep(STOP_WITHIN_S)
             wire_after = proxy.last_motion  # what the dome was last told
             await asyncio.sleep(STALL_S - STOP_WITHIN_S)
             stops = [t for t in proxy.stop_times if t > start]
             pings_late = [t for t in notify.pings[pings_before:] if t > start + 3.0]
-            sim.send_signal(signal.SIGCONT)
+            sim.send_signal(signal.SIGUSR2)
             end = self.now()
             await self._wait_for(lambda: notify.frames > frames_before + 5, 30)
             resumed = notify.frames > frames_before + 5

@@ -183,3 +183,68 @@ def test_sim_camera_bad_input(
     result = _ptzd("sim-camera", *args)
     assert result.returncode == 2, result.stderr
     assert message in result.stderr
+
+
+def test_sim_camera_stream_stalls_on_sigusr1_while_the_dome_takes_commands(
+    wide_video: Path, tmp_path: Path
+) -> None:
+    """The soak's `stream-stall`: SIGUSR1 stops the MJPEG parts, the dome still obeys the
+    serial line (a STOP sent during the stall stops it then, not on resume), SIGUSR2 resumes."""
+    import contextlib
+    import itertools
+    import signal
+    import socket
+    import time
+
+    import serial
+
+    from ptzd.pelco.codec import Motion, PelcoProtocol, encode
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "ptzd", "--log-format", "json", "sim-camera", "--video",
+         str(wide_video), "--loop", "--duration", "6", "--http", "127.0.0.1:0",
+         "--record", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert process.stdout is not None
+        pty_path = process.stdout.readline().split()[1]
+        url = process.stdout.readline().split()[1]
+        host, port = url.split("/")[2].split(":")
+        stream = socket.create_connection((host, int(port)), timeout=5)
+        stream.sendall(b"GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+
+        def parts_within(seconds: float) -> int:
+            stream.settimeout(0.1)
+            data = b""
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                with contextlib.suppress(TimeoutError):
+                    data += stream.recv(65536)
+            return data.count(b"X-Frame:")
+
+        assert parts_within(0.5) > 2
+        with serial.Serial(pty_path, baudrate=4800, timeout=1) as line:
+            line.write(encode(Motion(pan=63), protocol=PelcoProtocol.P, address=1))
+            process.send_signal(signal.SIGUSR1)
+            parts_within(0.2)  # what was in flight
+            line.write(encode(Motion(), protocol=PelcoProtocol.P, address=1))
+            assert parts_within(1.0) == 0
+            process.send_signal(signal.SIGUSR2)
+            assert parts_within(0.5) > 2
+        stream.close()
+        _, err = process.communicate(timeout=30)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    camera = _jsonl(tmp_path / "camera.jsonl")
+    serial_log = _jsonl(tmp_path / "serial.jsonl")
+    assert [s["pan"] for s in serial_log] == [63, 0]
+    # the dome went on through the stall (no gap in what it rendered), took the STOP when it
+    # was sent, and stood still from then on
+    times = [float(c["t"]) for c in camera]  # type: ignore[arg-type]
+    assert max(b - a for a, b in itertools.pairwise(times)) < 0.2
+    stop_t = float(serial_log[1]["t"])  # type: ignore[arg-type]
+    after = [c for c in camera if float(c["t"]) > stop_t + 0.3]  # type: ignore[arg-type]
+    assert after and len({c["pan"] for c in after}) == 1
+    assert float(after[0]["pan"]) > 0.0  # type: ignore[arg-type]

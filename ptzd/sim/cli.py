@@ -10,6 +10,7 @@ import argparse
 import asyncio
 import json
 import re
+import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ from ptzd.errors import UsageError
 if TYPE_CHECKING:
     from ptzd.sim.camera import SimCamera
     from ptzd.sim.config import SimConfig
+    from ptzd.sim.mjpeg import MjpegServer
 
 _SIZE = re.compile(r"^(\d+)x(\d+)$")
 _HOST_PORT = re.compile(r"^(?:tcp://)?(\[[^\]]+\]|[^:]*):(\d+)$")
@@ -220,6 +222,7 @@ async def _run_camera(
             mjpeg = MjpegServer(*http, quality=config.jpeg_quality)
             camera.listeners.append(mjpeg.publish)
             print(f"http {await mjpeg.start()}", flush=True)
+            _stall_on_signals(mjpeg)
         await _drive(camera, clock, duration, replay)
     finally:
         if pty_endpoint is not None:
@@ -245,6 +248,16 @@ async def _run_camera(
         flush=True,
     )
     return 0
+
+
+def _stall_on_signals(mjpeg: MjpegServer) -> None:
+    """SIGUSR1 stalls the MJPEG stream, SIGUSR2 resumes it (the soak's `stream-stall`): the
+    encoder stops while the dome's controller goes on taking commands, as on a real dome
+    whose video stalls. (Freezing the whole process, as the soak once did, also froze the
+    dome's serial line and then applied 6 s of the last speed at once on resume.)"""
+    loop = asyncio.get_running_loop()
+    loop.add_signal_handler(signal.SIGUSR1, mjpeg.stall, True)
+    loop.add_signal_handler(signal.SIGUSR2, mjpeg.stall, False)
 
 
 async def _drive(

@@ -38,6 +38,8 @@ class MjpegServer:
         self._new_part = asyncio.Event()
         self.url = ""
         self.frames_encoded = 0
+        # a stalled encoder (soak fault `stream-stall`): frames are rendered, none are sent
+        self.paused = False
 
     async def start(self) -> str:
         """Listen; returns the stream URL (with the real port when 0 was asked for)."""
@@ -47,9 +49,14 @@ class MjpegServer:
         _log.info("mjpeg_listen", url=self.url)
         return self.url
 
+    def stall(self, paused: bool) -> None:
+        """Stop sending frames (`paused`) or send them again; clients stay connected."""
+        self.paused = paused
+        _log.warning("mjpeg_stalled" if paused else "mjpeg_resumed")
+
     def publish(self, frame: SimFrame) -> None:
         """Encode `frame` once (only if someone is watching) and wake every client."""
-        if not self._clients:
+        if not self._clients or self.paused:
             return
         data = encode_jpeg(frame.image, self._quality)
         if data is None:
