@@ -213,9 +213,14 @@ def _well_visible(gt: GroundTruth, track: int, frame: int) -> bool:
     return inside and fully_visible(gt, track, frame) and h >= 0.05 * height
 
 
+def _first_well_visible(gt: GroundTruth, track: int) -> int | None:
+    """The first frame in which the walker is well visible, or None if he never is."""
+    return next((f for f in sorted(gt.tracks[track]) if _well_visible(gt, track, f)), None)
+
+
 def first_well_visible(gt: GroundTruth, track: int) -> int:
     """The first frame in which the walker is fully visible, inside the frame and not tiny."""
-    start = next((f for f in sorted(gt.tracks[track]) if _well_visible(gt, track, f)), None)
+    start = _first_well_visible(gt, track)
     if start is None:
         raise UsageError(f"--target {track}: the walker is never fully in view")
     return start
@@ -226,7 +231,7 @@ def pick_walker(gt: GroundTruth) -> tuple[int, int]:
     most frames left after it is first fully in view (ties: the earliest start)."""
     best: tuple[int, int, int] | None = None  # (frames left, -start, -id)
     for tid, frames in gt.tracks.items():
-        start = next((f for f in sorted(frames) if _well_visible(gt, tid, f)), None)
+        start = _first_well_visible(gt, tid)
         if start is None:
             continue
         key = (sum(1 for f in frames if f >= start), -start, -tid)

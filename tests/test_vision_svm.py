@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from ptzd.vision.config import TrackerConfig
+from ptzd.vision.config import LkMotion, TrackerConfig
 from ptzd.vision.features import ColourTextureMaps, lbp_riu2, rgb_codes
 from ptzd.vision.svm import (
     LucasKanade,
@@ -104,7 +104,7 @@ def test_lucas_kanade_recovers_a_shift() -> None:
 
 
 @pytest.mark.parametrize("motion", ["affine", "scale", "translation"])
-def test_lucas_kanade_motion_models(motion: str) -> None:
+def test_lucas_kanade_motion_models(motion: LkMotion) -> None:
     """Each motion model recovers what it can represent and nothing else: the frame is
     the template's texture stretched 8 % wider and 4 % taller about the box centre."""
     image = _textured(1)

@@ -255,6 +255,9 @@ class RfConfig(StrictModel):
         return self
 
 
+LkMotion = Literal["affine", "scale", "translation"]  # SvmConfig.lk_motion
+
+
 class SvmConfig(StrictModel):
     """SVM + Lucas-Kanade tracker (Sun 2015, seed 004)."""
 
@@ -285,8 +288,8 @@ class SvmConfig(StrictModel):
     # LK's warp: "affine" (the seed's eq. 10, six parameters), "scale" (one scale factor and
     # a shift, the init box's aspect kept, as the PF's particles) or "translation". Ours:
     # "scale"; the affine warp's free stretch let the box grow into the background above
-    # walkers (vtest.avi AUC 0.575 -> 0.596, closed loop 19/27 -> 22/27; docs/tracking.md).
-    lk_motion: Literal["affine", "scale", "translation"] = "scale"
+    # walkers (vtest.avi AUC 0.580 -> 0.602, closed loop 19/27 -> 22/27; docs/tracking.md).
+    lk_motion: LkMotion = "scale"
     # Feature sample grid per box side and PF random-walk sigma in box sizes (ours).
     grid: int = Field(default=16, ge=4, le=64)
     sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)

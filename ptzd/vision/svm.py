@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from sklearn.svm import SVC
 
-from ptzd.vision.config import SvmConfig, TrackerConfig
+from ptzd.vision.config import LkMotion, SvmConfig, TrackerConfig
 from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import VELOCITY_SMOOTHING, apply_homography, ego_motion_matrix
@@ -125,6 +125,15 @@ class SvmModel:
         return platt_probability(self.decision(x), *self.platt)
 
 
+# Each warp's parameters in terms of the affine ones (a1, a2, a3, a4, tx, ty): "scale" is
+# a1 = a4 = s with a shift, "translation" the shift alone.
+_LK_BASES: dict[LkMotion, FloatArray] = {
+    "affine": np.eye(6),
+    "scale": np.array([[1, 0, 0], [0, 0, 0], [0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]),
+    "translation": np.eye(6)[:, 4:],
+}
+
+
 class LucasKanade:
     """Inverse-compositional Lucas-Kanade on a small grey template (seed eq. 10).
 
@@ -132,10 +141,11 @@ class LucasKanade:
     and a shift: the template's aspect is kept) or "translation".
     """
 
-    def __init__(self, size: int, iterations: int, motion: str = "affine") -> None:
+    def __init__(self, size: int, iterations: int, motion: LkMotion = "affine") -> None:
         self._size = size
         self._iterations = iterations
-        self._motion = motion
+        # the warp's parameters as a basis of the six affine ones (a1..a4, tx, ty)
+        self._basis = _LK_BASES[motion]
         self._template: FloatArray = np.zeros((1, 1))
         self._sd: FloatArray = np.zeros((1, 6))
         self._hessian_inv: FloatArray = np.eye(6)
@@ -156,13 +166,9 @@ class LucasKanade:
         gy, gx = (np.asarray(g, dtype=np.float64) for g in np.gradient(self._template))
         v, u = np.mgrid[0:th, 0:tw].astype(np.float64)
         gx, gy, u, v = gx.ravel(), gy.ravel(), u.ravel(), v.ravel()
-        if self._motion == "affine":
-            self._sd = np.column_stack([gx * u, gy * u, gx * v, gy * v, gx, gy])
-        elif self._motion == "scale":
-            self._sd = np.column_stack([gx * u + gy * v, gx, gy])
-        else:
-            self._sd = np.column_stack([gx, gy])
-        k = self._sd.shape[1]
+        affine_sd = np.column_stack([gx * u, gy * u, gx * v, gy * v, gx, gy])
+        self._sd = affine_sd @ self._basis
+        k = self._basis.shape[1]
         hessian = self._sd.T @ self._sd + np.eye(k) * 1e-6
         self._hessian_inv = np.asarray(np.linalg.inv(hessian), dtype=np.float64)
         self._variance = max(float(self._template.var()), 1.0)
@@ -184,11 +190,7 @@ class LucasKanade:
         residual = np.zeros(1)
         for _ in range(self._iterations):
             residual = (self._sample(grey, (tw, th)) - self._template).ravel()
-            dp = self._hessian_inv @ (self._sd.T @ residual)
-            if dp.shape[0] == 3:
-                dp = np.array([dp[0], 0.0, 0.0, dp[0], dp[1], dp[2]])
-            elif dp.shape[0] == 2:
-                dp = np.array([0.0, 0.0, 0.0, 0.0, dp[0], dp[1]])
+            dp = self._basis @ (self._hessian_inv @ (self._sd.T @ residual))
             delta = np.array([[1 + dp[0], dp[2], dp[4]], [dp[1], 1 + dp[3], dp[5]], [0, 0, 1.0]])
             self.warp = self.warp @ np.linalg.inv(delta)
             if float(np.abs(dp[4:]).max()) < 0.01 and float(np.abs(dp[:4]).max()) < 1e-4:
