@@ -10,7 +10,7 @@ time from a frame being rendered to its command being written (tracker included)
 machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
-        [--box-scale 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0]
+        [--box-scale 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0] [--jobs 2] [--no-vtest]
 
 `--walkers-of SEED` adds every walker of synthetic:SEED seen for at least 4 s, each
 followed from the frame in which he is first well in view (`ptzd sim --target ID`): the
@@ -35,6 +35,7 @@ import itertools
 import json
 import statistics
 import tempfile
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -52,15 +53,17 @@ def cases(
     box_scale: float = 1.0,
     scaled_dir: Path | None = None,
     thermal_seeds: tuple[int, ...] = (),
+    vtest: bool = True,
 ) -> list[tuple[str, str, str | None, int | None]]:
     """(name, source, ground truth, target) per case; with `box_scale` != 1 the vtest
     annotations are written, boxes scaled, under `scaled_dir` and played from there.
-    `thermal_seeds`: the same synthetic scenes seen by a thermal camera (`thermal:SEED`)."""
+    `thermal_seeds`: the same synthetic scenes seen by a thermal camera (`thermal:SEED`);
+    `vtest`: the annotated vtest.avi tracks too, if the video is here."""
     out: list[tuple[str, str, str | None, int | None]] = [
         (f"synthetic:{s}", f"synthetic:{s}", None, None) for s in seeds
     ]
     out += [(f"thermal:{s}", f"synthetic-thermal:{s}", None, None) for s in thermal_seeds]
-    if VTEST.exists():
+    if vtest and VTEST.exists():
         for gt in sorted((ROOT / "bench" / "annotations").glob("vtest_*.json")):
             doc = json.loads(gt.read_text())
             if box_scale != 1.0:
@@ -208,19 +211,41 @@ def main() -> None:
     parser.add_argument(
         "--box-scale", type=float, default=1.0, help="vtest boxes this many times as large"
     )
+    parser.add_argument("--no-vtest", action="store_true", help="leave out the vtest.avi tracks")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="runs side by side in this many processes (scores are the same; latencies are "
+        "then measured on a busier machine)",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "closed_loop.json")
     args = parser.parse_args()
     if not 0.2 <= args.box_scale <= 5.0:
         parser.error(f"--box-scale must be in [0.2, 5], got {args.box_scale}")
+    if not 1 <= args.jobs <= 64:
+        parser.error(f"--jobs must be in [1, 64], got {args.jobs}")
     with tempfile.TemporaryDirectory(prefix="ptzd-gt-") as scaled_dir:
-        rows = [
-            run_row(name, spec, gt, target, tracker_seed, args)
+        listed = cases(
+            args.seeds,
+            args.box_scale,
+            Path(scaled_dir),
+            tuple(args.thermal_seeds),
+            vtest=not args.no_vtest,
+        )
+        runs = [
+            (name, spec, gt, target, tracker_seed, args)
             for (name, spec, gt, target), tracker_seed in itertools.product(
-                cases(args.seeds, args.box_scale, Path(scaled_dir), tuple(args.thermal_seeds))
-                + walker_cases(args.walkers_of),
-                args.tracker_seeds,
+                listed + walker_cases(args.walkers_of), args.tracker_seeds
             )
         ]
+        if args.jobs == 1:
+            rows = [run_row(*run) for run in runs]
+        else:
+            # each run is deterministic on the virtual clock, so running them side by side
+            # changes nothing but the (wall-clock) latency figures
+            with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+                rows = list(pool.map(run_row, *zip(*runs, strict=True)))
     header = f"{'case':<14}{'tseed':>6}{'frames':>7}{'centred':>9}{'in view':>9}{'size err':>9}"
     header += f"{'p50 ms':>8}{'p99 ms':>8}{'rev':>5}{'rev/10s':>8}"
     print(header)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,10 @@ def test_cases_play_scaled_copies_of_the_annotations(tmp_path: Path) -> None:
 
 
 def test_thermal_cases_are_their_own_class() -> None:
+    assert cases([1], thermal_seeds=(3,), vtest=False) == [
+        ("synthetic:1", "synthetic:1", None, None),
+        ("thermal:3", "synthetic-thermal:3", None, None),
+    ]
     listed = cases([1], thermal_seeds=(3,))
     assert listed[:2] == [
         ("synthetic:1", "synthetic:1", None, None),
@@ -67,3 +72,30 @@ def test_walker_cases_are_the_walkers_seen_long_enough() -> None:
     assert summarise(rows) == {
         "walker": {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
     }
+
+
+@pytest.mark.slow
+def test_runs_side_by_side_score_as_one_after_another(tmp_path: Path) -> None:
+    """`--jobs 2` spreads the runs over processes; on the virtual clock every score is the
+    same as running them in turn, and the rows keep the cases' order."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    docs = []
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}.json"
+        command = [sys.executable, "-m", "bench.closed_loop", "--seeds", "3", "4"]
+        command += ["--duration", "2", "--no-vtest", "--jobs", str(jobs), "--out", str(out)]
+        subprocess.run(
+            command,
+            cwd=root,
+            check=True,
+            capture_output=True,
+            timeout=110,
+        )
+        docs.append(json.loads(out.read_text()))
+    scores = [[(r["case"], r["centred"], r["in_view"], r["frames"]) for r in d["rows"]]
+              for d in docs]  # fmt: skip
+    assert [case for case, *_ in scores[0]] == ["synthetic:3", "synthetic:4"]
+    assert scores[0] == scores[1]
