@@ -108,6 +108,24 @@ def vtest_sequences(max_frames: int | None, only: set[str] | None) -> Iterator[S
             )
 
 
+def fair_start(gt: Any, tid: int, frame: int) -> bool:
+    """Whether walker `tid` makes a fair init box in `frame`: at least 20 px tall and 8 wide,
+    at least 80 % visible, clear of the frame border."""
+    x, y, w, h = gt.tracks[tid][frame]
+    width, height = gt.size
+    if h < 20 or w < 8 or gt.visibility.get(tid, {}).get(frame, 1.0) < 0.8:
+        return False
+    return bool(x > 0 and y > 0 and x + w < width and y + h < height)
+
+
+def span_end(boxes: dict[int, Box], first: int, max_frames: int) -> int:
+    """The last frame of the run of frames with a box from `first`, at most `max_frames`."""
+    last = first
+    while last + 1 in boxes and last + 1 - first < max_frames:
+        last += 1
+    return last
+
+
 def _pick_targets(
     gt: Any, horizon: int, count: int, max_frames: int, min_frames: int = 60
 ) -> list[tuple[int, int, int]]:
@@ -118,19 +136,12 @@ def _pick_targets(
     the track has a box (occluded frames included: the truth is amodal), for up to
     `max_frames` frames. The longest sequences win.
     """
-    width, height = gt.size
     spans: list[tuple[int, int, int, int]] = []
     for tid, boxes in gt.tracks.items():
-        visible = gt.visibility.get(tid, {})
         for f in sorted(f for f in boxes if f < horizon):
-            x, y, w, h = boxes[f]
-            if h < 20 or w < 8 or visible.get(f, 1.0) < 0.8:
+            if not fair_start(gt, tid, f):
                 continue
-            if x <= 0 or y <= 0 or x + w >= width or y + h >= height:
-                continue
-            last = f
-            while last + 1 in boxes and last + 1 - f < max_frames:
-                last += 1
+            last = span_end(boxes, f, max_frames)
             if last - f + 1 >= min_frames:
                 spans.append((last - f, tid, f, last))
             break

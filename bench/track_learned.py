@@ -7,6 +7,10 @@ A companion of bench/track.py (same sequences, scoring and table), kept separate
 can change independently. Adds:
 - `synthetic-thermal`: the simulator's thermal rendering (`synthetic-thermal:SEED`, grey),
   fed to the trackers as single-channel HxW frames (the peers get it replicated to BGR);
+- `synthetic-occluded` / `thermal-occluded`: occlusion-heavy windows of the synthetic
+  scenes (colour, and the same scene and walker as the thermal camera sees it), chosen by
+  the scene's visibility map: the target starts in full view, is at least half hidden for
+  a while, and comes back into view (the issue's "occlusion-heavy sequences");
 - `rf-static`: the RF learned once on the first frame (Ko 2013 sec. 5.4 ablation);
 - a speed section: `rf` at 320x240 with N = 120 and `svm` at 640x480 (the issue's targets),
   `color` at both sizes, on vtest frames resized, pinned to one core, median of repeats.
@@ -42,9 +46,11 @@ from bench.track import (  # noqa: E402
     Matrix,
     OpenCVTracker,
     Sequence,
+    fair_start,
     opencv_tracker_factory,
     print_table,
     run_tracker,
+    span_end,
     synthetic_sequences,
     vtest_sequences,
 )
@@ -53,6 +59,11 @@ from ptzd.sim.groundtruth import load_ground_truth  # noqa: E402
 from ptzd.vision.config import RfConfig, TrackerConfig  # noqa: E402
 
 LEARNED_CLASSES = ("vtest", "synthetic-static", "synthetic-thermal")
+OCCLUDED_CLASSES = ("synthetic-occluded", "thermal-occluded")
+# an occlusion window: the target at least this visible where it starts and once it is back,
+# under HIDDEN for at least MIN_HIDDEN frames (and at most MAX_HIDDEN_SHARE of the window: a
+# walk along behind a hedge is hidden, not occluded) in between, then back for MIN_BACK frames
+VISIBLE, HIDDEN, MIN_HIDDEN, MAX_HIDDEN_SHARE, MIN_BACK = 0.8, 0.5, 8, 0.5, 10
 DEFAULT = ("color", "rf", "rf-static", "svm")
 
 
@@ -128,6 +139,65 @@ def thermal_sequences(seeds: list[int], max_frames: int, targets: int) -> Iterat
             yield Sequence(f"thermal{seed}-t{tid}", "synthetic-thermal", frames, truth)
 
 
+def pick_occlusions(
+    gt: Any, max_frames: int, count: int, step: int = 10
+) -> list[tuple[int, int, int, int]]:
+    """(hidden frames, track id, first, last) of up to `count` occlusion windows, the most
+    hidden first, one per walker.
+
+    A window starts on a frame (every `step`-th) where the walker makes a fair init box
+    (`fair_start`: at least 80 % visible, clear of the border), runs while the track has a
+    box for up to `max_frames` frames, and qualifies if within it he is under HIDDEN
+    visible on at least MIN_HIDDEN frames (and at most on MAX_HIDDEN_SHARE of the window)
+    and, after the first of them, at least VISIBLE visible on at least MIN_BACK frames (he
+    comes back: a tracker can find him again)."""
+    best: dict[int, tuple[int, int, int, int]] = {}
+    for tid, boxes in gt.tracks.items():
+        visible = gt.visibility.get(tid, {})
+        for first in sorted(boxes)[::step]:
+            if not fair_start(gt, tid, first):
+                continue
+            last = span_end(boxes, first, max_frames)
+            shares = [visible.get(f, 0.0) for f in range(first, last + 1)]
+            hidden = [i for i, v in enumerate(shares) if v < HIDDEN]
+            if not MIN_HIDDEN <= len(hidden) <= MAX_HIDDEN_SHARE * len(shares):
+                continue
+            back = sum(v >= VISIBLE for v in shares[hidden[0] :])
+            if back < MIN_BACK:
+                continue
+            window = (len(hidden), tid, first, last)
+            if tid not in best or window[0] > best[tid][0]:
+                best[tid] = window
+    return sorted(best.values(), key=lambda w: (-w[0], w[1]))[:count]
+
+
+def occluded_sequences(
+    seeds: list[int], max_frames: int, count: int, classes: set[str]
+) -> Iterator[Sequence]:
+    """The `pick_occlusions` windows of `synthetic:SEED`, in colour (`synthetic-occluded`)
+    and as the thermal camera sees the same scene (`thermal-occluded`, single-channel)."""
+    from ptzd.sim.sources import open_wide_source
+
+    for seed in seeds:
+        colour = open_wide_source(f"synthetic:{seed}")
+        gt = colour.ground_truth
+        if gt is None:
+            continue
+        thermal = open_wide_source(f"synthetic-thermal:{seed}")
+        for hidden, tid, first, last in pick_occlusions(gt, max_frames, count):
+            truth = {i - first: gt.tracks[tid][i] for i in range(first, last + 1)}
+            note = f"frames {first}..{last}, {hidden} under {HIDDEN:.0%} visible"
+            if "synthetic-occluded" in classes:
+                frames = [colour.read(i) for i in range(first, last + 1)]
+                yield Sequence(f"occ{seed}-t{tid}", "synthetic-occluded", frames, truth, note=note)
+            if "thermal-occluded" in classes:
+                grey = [
+                    np.asarray(cv2.cvtColor(thermal.read(i), cv2.COLOR_BGR2GRAY), np.uint8)
+                    for i in range(first, last + 1)
+                ]
+                yield Sequence(f"occ{seed}-t{tid}", "thermal-occluded", grey, truth, note=note)
+
+
 def speed(frames: list[Frame], init: Box, size: tuple[int, int], names: list[str], repeats: int,
           seed: int) -> dict[str, float]:  # fmt: skip
     """Median tracked frames/s per tracker on `frames` resized to `size`."""
@@ -154,7 +224,14 @@ def speed(frames: list[Frame], init: Box, size: tuple[int, int], names: list[str
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.track_learned")
     parser.add_argument("--trackers", default=",".join(DEFAULT))
-    parser.add_argument("--classes", default=",".join(LEARNED_CLASSES))
+    parser.add_argument(
+        "--classes",
+        default=",".join(LEARNED_CLASSES),
+        help=f"of {', '.join(LEARNED_CLASSES + OCCLUDED_CLASSES)}",
+    )
+    parser.add_argument("--occluded-seeds", default="0,1,2,3,4,5,6,7,8,9")
+    parser.add_argument("--occluded-per-seed", type=int, default=2)
+    parser.add_argument("--occluded-frames", type=int, default=150)
     parser.add_argument("--seeds", default="1,2")
     parser.add_argument("--targets-per-seed", type=int, default=2)
     parser.add_argument("--max-frames", type=int, default=300)
@@ -195,6 +272,10 @@ def main(argv: list[str] | None = None) -> int:
         )
     if "synthetic-thermal" in classes:
         sources.append(thermal_sequences(seeds, args.max_frames, args.targets_per_seed))
+    if classes & set(OCCLUDED_CLASSES):
+        occluded_seeds = [int(s) for s in args.occluded_seeds.split(",")]
+        per_seed, length = args.occluded_per_seed, args.occluded_frames
+        sources.append(occluded_sequences(occluded_seeds, length, per_seed, classes))
     results: list[dict[str, Any]] = []
     for source in sources:
         for seq in source:
@@ -267,7 +348,7 @@ def mean_over_seeds(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _summarise(results: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
     summary: dict[str, Any] = {}
-    for cls in LEARNED_CLASSES:
+    for cls in LEARNED_CLASSES + OCCLUDED_CLASSES:
         rows = [r for r in results if r["class"] == cls]
         if not rows:
             continue

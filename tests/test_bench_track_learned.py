@@ -28,3 +28,32 @@ def test_scores_are_averaged_over_seeds_and_fps_is_the_median() -> None:
 def test_one_seed_is_the_run_itself() -> None:
     run = _run(0.3, 0, 50.0, [1.0])
     assert mean_over_seeds([run]) is run
+
+
+def _walker(shares: list[float], box: tuple[float, float, float, float] = (100, 100, 20, 50)):
+    frames = range(len(shares))
+    return dict.fromkeys(frames, box), dict(zip(frames, shares, strict=True))
+
+
+def test_occlusion_windows_are_where_a_walker_is_hidden_and_comes_back() -> None:
+    from types import SimpleNamespace
+
+    from bench.track_learned import pick_occlusions
+
+    walkers = {
+        1: _walker([1.0] * 20 + [0.2] * 12 + [0.9] * 20),  # hidden 12 frames, then back
+        2: _walker([1.0] * 20 + [0.3] * 30 + [0.9] * 5),  # hidden, back for too short
+        3: _walker([1.0] * 60),  # never hidden
+        4: _walker([1.0] * 10 + [0.0] * 40 + [1.0] * 10),  # hidden most of the window
+        5: _walker([0.9] * 10 + [0.4] * 20 + [1.0] * 30),  # the most hidden that qualifies
+        6: _walker([1.0] * 20 + [0.2] * 12 + [0.9] * 20, box=(0, 100, 20, 50)),  # on the border
+    }
+    gt = SimpleNamespace(
+        size=(640, 480),
+        tracks={tid: boxes for tid, (boxes, _) in walkers.items()},
+        visibility={tid: shares for tid, (_, shares) in walkers.items()},
+    )
+    assert pick_occlusions(gt, max_frames=100, count=5) == [(20, 5, 0, 59), (12, 1, 0, 51)]
+    assert pick_occlusions(gt, max_frames=100, count=1) == [(20, 5, 0, 59)]
+    # a window too short to see him come back does not qualify
+    assert pick_occlusions(gt, max_frames=25, count=5) == []
