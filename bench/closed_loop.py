@@ -35,6 +35,7 @@ import itertools
 import json
 import statistics
 import tempfile
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -136,9 +137,20 @@ async def run_case(spec: str, gt: str | None, target: int | None, duration: floa
     return await run_closed_loop(options)
 
 
+MISSES_HEADER = "uncentred T/O/L/other"
+
+
+def misses(by_state: dict[str, int]) -> str:
+    """Uncentred frames while tracking / occluded / lost / anything else (searching, going
+    home, dropped), as `T/O/L/other`."""
+    main = [by_state.get(s, 0) for s in ("tracking", "occluded", "lost")]
+    other = sum(n for s, n in by_state.items() if s not in ("tracking", "occluded", "lost"))
+    return "/".join(str(n) for n in [*main, other])
+
+
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per class of case (synthetic, thermal, walker, vtest): runs, mean centred / in view, targets
-    met."""
+    met, and the uncentred frames summed by tracker state."""
     out: dict[str, dict[str, Any]] = {}
     for kind in ("synthetic", "thermal", "walker", "vtest"):
         mine = [r for r in rows if r["case"].startswith(kind)]
@@ -149,6 +161,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             "centred_mean": round(statistics.fmean(r["centred"] for r in mine), 4),
             "in_view_mean": round(statistics.fmean(r["in_view"] for r in mine), 4),
             "met": sum(r["centred"] >= 0.95 and r["in_view"] >= 1.0 for r in mine),
+            "uncentred_by_state": dict(
+                sum((Counter(r.get("uncentred_by_state", {})) for r in mine), Counter())
+            ),
         }
     return out
 
@@ -175,6 +190,7 @@ def run_row(name: str, spec: str, gt: str | None, target: int | None, tracker_se
         "reversals": report["zoom_reversals"],
         "max_reversals_per_10s": report["max_reversals_per_10s"],
         "dropped": report["frames_dropped"],
+        "uncentred_by_state": report["uncentred_by_state"],
     }
 
 
@@ -247,20 +263,21 @@ def main() -> None:
             with ProcessPoolExecutor(max_workers=args.jobs) as pool:
                 rows = list(pool.map(run_row, *zip(*runs, strict=True)))
     header = f"{'case':<14}{'tseed':>6}{'frames':>7}{'centred':>9}{'in view':>9}{'size err':>9}"
-    header += f"{'p50 ms':>8}{'p99 ms':>8}{'rev':>5}{'rev/10s':>8}"
+    header += f"{'p50 ms':>8}{'p99 ms':>8}{'rev':>5}{'rev/10s':>8}  {MISSES_HEADER}"
     print(header)
     for r in rows:
         print(
             f"{r['case']:<14}{r['tracker_seed']:>6}{r['frames']:>7}{r['centred']:>9.3f}{r['in_view']:>9.3f}"
             f"{(r['size_err_median'] or 0):>9.3f}{r['latency_p50_ms']:>8.1f}"
             f"{r['latency_p99_ms']:>8.1f}{r['reversals']:>5}{r['max_reversals_per_10s']:>8}"
+            f"  {misses(r['uncentred_by_state'])}"
         )
     summary = summarise(rows)
     for kind, s in summary.items():
         print(
             f"{kind:<10} runs {s['runs']:>3}  mean centred {s['centred_mean']:.3f}  in view "
             f"{s['in_view_mean']:.3f}  target met (centred >= 0.95, in view 1.0) "
-            f"{s['met']}/{s['runs']}"
+            f"{s['met']}/{s['runs']}; {MISSES_HEADER} {misses(s['uncentred_by_state'])}"
         )
     out = args.out
     out.parent.mkdir(parents=True, exist_ok=True)

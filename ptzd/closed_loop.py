@@ -20,6 +20,7 @@ import asyncio
 import itertools
 import json
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -623,6 +624,11 @@ def build_report(
     scored = centred = in_view = 0
     size_errors: list[float] = []
     per_frame: list[dict[str, Any]] = []
+    # what the tracker said of each frame the target was not centred in: a miss while
+    # tracking is the control's (or a box on the wrong thing), while occluded the coast's,
+    # while lost the search's ("none": the frame was dropped, or its record not kept)
+    state_of = {t["frame"]: t["state"] for t in tracks}
+    uncentred: Counter[str] = Counter()
     for frame in rendered:
         box = target_frames.get(frame.video_frame)
         if box is None:
@@ -634,6 +640,8 @@ def build_report(
         ok_centre = ok_view and in_central_cell(u, v, width, height)
         in_view += ok_view
         centred += ok_centre
+        if not ok_centre:
+            uncentred[state_of.get(frame.index, "none")] += 1
         view_box = model.box_to_view(box, frame.pose)
         size_error = None
         if view_box is not None and ok_view:
@@ -656,6 +664,7 @@ def build_report(
         "frames_scored": scored,
         "centred_fraction": centred / scored if scored else None,
         "in_view_fraction": in_view / scored if scored else None,
+        "uncentred_by_state": dict(sorted(uncentred.items())),
         "size_error_median": size_errors[len(size_errors) // 2] if size_errors else None,
         "size_error_mean": sum(size_errors) / len(size_errors) if size_errors else None,
         "zoom_layer_timeline": [[t, layer] for t, layer in zoom_timeline],

@@ -43,10 +43,24 @@ def test_thermal_cases_are_their_own_class() -> None:
         ("thermal:3", "synthetic-thermal:3", None, None),
     ]
     rows = [{"case": "synthetic:1", "centred": 1.0, "in_view": 1.0},
-            {"case": "thermal:3", "centred": 0.5, "in_view": 1.0}]  # fmt: skip
+            {"case": "thermal:3", "centred": 0.5, "in_view": 1.0,
+             "uncentred_by_state": {"occluded": 3, "lost": 2}}]  # fmt: skip
     summary = summarise(rows)
     assert summary["synthetic"]["met"] == 1 and summary["synthetic"]["runs"] == 1
-    assert summary["thermal"] == {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
+    assert summary["thermal"] == {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0,
+                                  "uncentred_by_state": {"occluded": 3, "lost": 2}}  # fmt: skip
+
+
+def test_uncentred_frames_are_summed_by_state_per_class() -> None:
+    from bench.closed_loop import misses
+
+    rows = [{"case": "synthetic:1", "centred": 0.9, "in_view": 1.0,
+             "uncentred_by_state": {"tracking": 4, "occluded": 1}},
+            {"case": "synthetic:2", "centred": 0.8, "in_view": 1.0,
+             "uncentred_by_state": {"tracking": 1, "searching": 2, "none": 1}}]  # fmt: skip
+    by_state = summarise(rows)["synthetic"]["uncentred_by_state"]
+    assert by_state == {"tracking": 5, "occluded": 1, "searching": 2, "none": 1}
+    assert misses(by_state) == "5/1/0/3"  # tracking / occluded / lost / the rest
 
 
 def test_walker_cases_are_the_walkers_seen_long_enough() -> None:
@@ -70,7 +84,13 @@ def test_walker_cases_are_the_walkers_seen_long_enough() -> None:
     assert len(ids) > 20 and len(walker_cases([0], min_frames=400)) < len(ids)
     rows = [{"case": "walker:0/4", "centred": 0.5, "in_view": 1.0}]
     assert summarise(rows) == {
-        "walker": {"runs": 1, "centred_mean": 0.5, "in_view_mean": 1.0, "met": 0}
+        "walker": {
+            "runs": 1,
+            "centred_mean": 0.5,
+            "in_view_mean": 1.0,
+            "met": 0,
+            "uncentred_by_state": {},
+        }
     }
 
 

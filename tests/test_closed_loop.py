@@ -133,3 +133,22 @@ def test_loop_needs_acquire_and_a_duration() -> None:
     for argv in (["--loop", "--duration", "5"], ["--loop", "--acquire"]):
         with pytest.raises(UsageError, match="--loop needs"):
             ClosedLoopOptions.from_args(parser.parse_args(argv))
+
+
+def test_the_report_puts_each_uncentred_frame_down_to_the_tracker_state() -> None:
+    from ptzd.closed_loop import _Rendered, build_report
+    from ptzd.sim.camera_model import CameraModel, Pose
+
+    view = (300, 300)
+    model = CameraModel(view, 70.0, view)  # this pose shows the wide frame as it is
+    pose = Pose(0.0, 0.0, 70.0)
+    rendered = [_Rendered(t=i / 10, video_frame=i, pose=pose, index=i) for i in range(6)]
+    centre, aside = (140.0, 130.0, 20.0, 40.0), (20.0, 130.0, 20.0, 40.0)
+    boxes = {0: centre, 1: centre, 2: aside, 3: aside, 4: aside, 5: aside}
+    states = ["tracking", "tracking", "tracking", "occluded", "occluded"]  # frame 5 dropped
+    tracks = [{"frame": i, "state": s} for i, s in enumerate(states)]
+    report = build_report(rendered=rendered, model=model, target_frames=boxes,
+                          desired_height=40.0, tracks=tracks, zoom_timeline=[(0.0, 0)],
+                          latencies=[], extra={})  # fmt: skip
+    assert report["centred_fraction"] == pytest.approx(2 / 6)
+    assert report["uncentred_by_state"] == {"none": 1, "occluded": 2, "tracking": 1}
