@@ -183,14 +183,16 @@ def occluded_sequences(
         gt = colour.ground_truth
         if gt is None:
             continue
-        thermal = open_wide_source(f"synthetic-thermal:{seed}")
+        thermal = (
+            open_wide_source(f"synthetic-thermal:{seed}") if "thermal-occluded" in classes else None
+        )
         for hidden, tid, first, last in pick_occlusions(gt, max_frames, count):
             truth = {i - first: gt.tracks[tid][i] for i in range(first, last + 1)}
             note = f"frames {first}..{last}, {hidden} under {HIDDEN:.0%} visible"
             if "synthetic-occluded" in classes:
                 frames = [colour.read(i) for i in range(first, last + 1)]
                 yield Sequence(f"occ{seed}-t{tid}", "synthetic-occluded", frames, truth, note=note)
-            if "thermal-occluded" in classes:
+            if thermal is not None:
                 grey = [
                     np.asarray(cv2.cvtColor(thermal.read(i), cv2.COLOR_BGR2GRAY), np.uint8)
                     for i in range(first, last + 1)
