@@ -138,13 +138,14 @@ async def run_case(spec: str, gt: str | None, target: int | None, duration: floa
 
 
 MISSES_HEADER = "uncentred T/O/L/other"
+_TRACKER_STATES = ("tracking", "occluded", "lost")  # T/O/L
 
 
 def misses(by_state: dict[str, int]) -> str:
     """Uncentred frames while tracking / occluded / lost / anything else (searching, going
     home, dropped), as `T/O/L/other`."""
-    main = [by_state.get(s, 0) for s in ("tracking", "occluded", "lost")]
-    other = sum(n for s, n in by_state.items() if s not in ("tracking", "occluded", "lost"))
+    main = [by_state.get(s, 0) for s in _TRACKER_STATES]
+    other = sum(n for s, n in by_state.items() if s not in _TRACKER_STATES)
     return "/".join(str(n) for n in [*main, other])
 
 
