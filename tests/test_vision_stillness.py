@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from ptzd.vision.config import TrackerConfig
-from ptzd.vision.stillness import MotionMap
+from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
 from ptzd.vision.tracking import TrackState, make_tracker
-from tests.vision_helpers import Scene
+from tests.vision_helpers import Frame, Scene, draw_person, iou
 
 
 def centre(box: tuple[float, float, float, float]) -> np.ndarray:
@@ -91,11 +92,19 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
     assert set(results["standing, test off"]) == {TrackState.TRACKING}
 
 
-def test_a_still_box_is_let_go_while_the_zoom_hunts() -> None:
+@pytest.mark.parametrize(
+    "config",
+    [
+        TrackerConfig(stillness={"still_frames": 25}),
+        TrackerConfig(kind="rf", rf={"still_frames": 25}),
+    ],
+    ids=["color", "rf"],
+)
+def test_a_still_box_is_let_go_while_the_zoom_hunts(config: TrackerConfig) -> None:
     # a still object with the zoom stepping in and out on it every few seconds: each step
     # rescales the image, and that is not motion
     scene = Scene(velocity=(0.0, 0.0))
-    tracker = make_tracker(TrackerConfig(stillness={"still_frames": 25}))
+    tracker = make_tracker(config)
     tracker.init(scene.frame(0), scene.truth(0))
     factor, states = 1.0, []
     for t in range(1, 60):
@@ -109,3 +118,60 @@ def test_a_still_box_is_let_go_while_the_zoom_hunts() -> None:
         states.append(tracker.update(view).state)
     assert states[:20] == [TrackState.TRACKING] * 20
     assert TrackState.LOST in states[25:]
+
+
+def test_motion_weights_favour_the_boxes_in_which_something_moved() -> None:
+    moved = np.array([0.0, 0.04, 0.16])
+    weights = motion_weights(moved, floor=0.2, min_fraction=0.02)
+    assert weights is not None
+    # floor for nothing, 1 for the most, the square root of the share between
+    assert weights.tolist() == pytest.approx([0.2, 0.2 + 0.8 * 0.5, 1.0])
+    # no evidence: unknown, nothing moved anywhere, or weighting off
+    assert motion_weights(None, 0.2, 0.02) is None
+    assert motion_weights(np.array([0.0, 0.01]), 0.2, 0.02) is None
+    assert motion_weights(moved, 1.0, 0.02) is None
+
+
+def test_the_still_counter_counts_still_frames_in_a_row() -> None:
+    counter = StillCounter(frames=3, min_fraction=0.02)
+    assert [counter.count(m) for m in (0.0, 0.01, None, 0.0)] == [False, False, False, True]
+    assert counter.count(0.5) is False and counter.run == 0  # something moved: start over
+    off = StillCounter(frames=0, min_fraction=0.02)
+    assert not any(off.count(0.0) for _ in range(20))
+
+
+def _twin_scene() -> tuple[Scene, list[Frame]]:
+    """A walker leaving behind a still twin (a figure in his colours where he started)."""
+    scene = Scene(velocity=(2.5, 0.0))
+    frames = []
+    for t in range(60):
+        frame = scene.frame(t)
+        draw_person(frame, scene.start, (40, 40, 200), (160, 60, 20))
+        frames.append(frame)
+    return scene, frames
+
+
+def test_rf_follows_the_walker_not_his_still_twin() -> None:
+    scene, frames = _twin_scene()
+    end = scene.truth(len(frames) - 1)
+    outcome: dict[str, list[tuple[TrackState, float, float]]] = {}
+    for name, rf in [
+        ("motion", {}),
+        ("appearance only", {"motion_floor": 1.0, "still_frames": 0}),
+        ("still test only", {"motion_floor": 1.0}),
+    ]:
+        outcome[name] = []
+        for seed in range(5):
+            tracker = make_tracker(TrackerConfig(kind="rf", seed=seed, rf=rf))
+            tracker.init(frames[0], scene.truth(0))
+            for frame in frames[1:]:
+                result = tracker.update(frame)
+            on_walker, on_twin = iou(result.box, end), iou(result.box, scene.start)
+            outcome[name].append((result.state, on_walker, on_twin))
+    # with the motion weights every seed follows him
+    assert all(s is TrackState.TRACKING and w > 0.5 for s, w, _ in outcome["motion"])
+    # on appearance alone the twin is as good: some seeds stay on it, tracking it
+    stayed = [i for i, (s, _, t) in enumerate(outcome["appearance only"]) if t > 0.3]
+    assert stayed and all(outcome["appearance only"][i][0] is TrackState.TRACKING for i in stayed)
+    # the still test alone lets go of the twin those seeds were left on
+    assert all(outcome["still test only"][i][0] is not TrackState.TRACKING for i in stayed)

@@ -245,6 +245,14 @@ class RfConfig(StrictModel):
     coast_decay: float = Field(default=0.95, ge=0.0, le=1.0)
     search_growth: float = Field(default=0.5, ge=0.0, le=10.0)
     max_search_sigma: float = Field(default=8.0, ge=1.0, le=100.0)
+    # Beyond the seed (2026-12-04): motion evidence (`tracker.stillness`'s motion map, the
+    # camera's motion taken out). Each particle's P is weighted by floor..1 after how much
+    # moved in a box of the target's size on it, relative to the most-moving particle
+    # (1 = off); and a box in which nothing moved for `still_frames` frames in a row is a
+    # full occlusion whatever the forests say (0 = off): the forests learn the occluder a
+    # walker went behind, and then score it above U_min for good (docs/tracking.md).
+    motion_floor: float = Field(default=0.2, ge=0.0, le=1.0)
+    still_frames: int = Field(default=15, ge=0, le=10_000)
 
     @model_validator(mode="after")
     def _memory_fits(self) -> RfConfig:
@@ -318,7 +326,8 @@ class StillnessConfig(StrictModel):
     acquisition or the search takes them up again when they move.
     """
 
-    # 0 turns the test off (the seeds' behaviour). 50 frames = 2 s at 25 fps.
+    # 0 turns the test off (the seeds' behaviour). 50 frames = 2 s at 25 fps. The colour
+    # tracker's: rf has its own (`RfConfig.still_frames`), with this table's thresholds.
     still_frames: int = Field(default=50, ge=0, le=10_000)
     # A pixel moved when its grey level changed by more than this (sensor noise is ~2-5).
     diff_threshold: int = Field(default=20, ge=1, le=255)

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from ptzd.vision.config import ResamplingConfig, TrackerConfig
 from ptzd.vision.likelihood import FloatArray, Frame, Likelihood
-from ptzd.vision.stillness import MotionMap
+from ptzd.vision.stillness import MotionMap, StillCounter
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 # Column indices of the particle state.
@@ -141,7 +141,7 @@ class ParticleTracker:
         self._confidence = 0.0
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold) if still.still_frames else None
-        self._still_frames = 0  # consecutive frames in which the box did not move
+        self._still = StillCounter(still.still_frames, still.min_moving_fraction)
         self._candidate_moved = True  # something moved in the last candidate box (or unknown)
         self._initialised = False
         self.resampled = False  # whether the last update resampled (for tests and debugging)
@@ -180,7 +180,7 @@ class ParticleTracker:
         self._lost_frames = 0
         self._reacquire_hits = 0
         self._confidence = 1.0
-        self._still_frames = 0
+        self._still.reset()
         self._candidate_moved = True
         if self._motion is not None:
             self._motion.reset(frame)
@@ -465,17 +465,10 @@ class ParticleTracker:
 
     def _box_is_still(self, box: FloatArray) -> bool:
         """Count the frames in which `box` did not move; whether there were `still_frames`."""
-        still = self._config.stillness
         moved = None if self._motion is None else self._motion.moving_fraction(box)
-        if moved is None:
-            self._candidate_moved = True
-            return False
-        self._candidate_moved = bool(moved[0] >= still.min_moving_fraction)
-        if moved[0] < still.min_moving_fraction:
-            self._still_frames += 1
-        else:
-            self._still_frames = 0
-        return self._still_frames >= still.still_frames
+        share = None if moved is None else float(moved[0])
+        self._candidate_moved = share is None or share >= self._still.min_fraction
+        return self._still.count(share)
 
     def _still_penalty(self, boxes: FloatArray) -> FloatArray | float:
         """While lost: what is taken off the log-likelihood of boxes in which nothing moved."""

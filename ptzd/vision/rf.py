@@ -17,6 +17,11 @@ memory (sec. 4.3) only when the learning condition of sec. 4.5 holds:
   OC >= T2 terminates the track (LOST; the search goes on and a learning-grade frame
   resumes it, beyond the seed).
 
+Beyond the seed, motion evidence (ptzd/vision/stillness.py): the particles' P is weighted
+towards boxes in which something moved (`RfConfig.motion_floor`), and a box in which
+nothing moved for `RfConfig.still_frames` frames is a full occlusion: forests that learned
+the occluder a walker went behind otherwise keep scoring it above U_min for good.
+
 U_max = min(0.72, alpha / ln sigma^2), sigma^2 the intensity variance of the target box,
 U_min = U_max - 0.4 (eqs. 21-22). Prediction is the second-order autoregressive model of
 eqs. 12-14. Frames may be HxW, HxWx1 or HxWx3 (grey or BGR; white-hot or black-hot alike:
@@ -49,6 +54,7 @@ from ptzd.vision.particle_filter import (
     ego_motion_matrix,
     weighted_resample,
 )
+from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0  # pixels: boxes never shrink below this
@@ -225,6 +231,10 @@ class RfTracker:
         self.learned_frames = 0
         self._frame_index = 0
         self._initialised = False
+        still = config.stillness
+        self._motion = MotionMap(still.diff_threshold)
+        self._camera_still = True  # no image motion handed in with the last frame
+        self._still = StillCounter(rf.still_frames, still.min_moving_fraction)
         resample_share = rf.top_particles / rf.num_particles
         self._resampling = ResamplingConfig(top_rate=resample_share, method="systematic")
 
@@ -250,6 +260,8 @@ class RfTracker:
         self._frame_index = 0
         self.learned_frames = 0
         maps = self.likelihood.maps(frame, self._cover(self._box[None, :]))
+        self._motion.reset(frame)
+        self._still.reset()
         self._learn(frame, maps)
         self._state = TrackState.TRACKING
         self._confidence = 1.0
@@ -261,12 +273,18 @@ class RfTracker:
         if not self._initialised:
             raise RuntimeError("init() the tracker before update()")
         self._frame_index += 1
-        if ego_motion is not None:
-            self._apply(ego_motion_matrix(ego_motion))
+        homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
+        if homography is not None:
+            self._apply(homography)
+        self._motion.update(frame, homography)
+        # while the camera turns, the image motion handed in is the commanded one, a little
+        # off the real; the background's edges then "move" and would draw the particles
+        self._camera_still = homography is None or bool(np.allclose(homography, np.eye(3)))
         previous = self._particles.copy()
         self._predict(frame.shape)
         maps = self.likelihood.maps(frame, self._cover(self._particles))
         probs = self.likelihood.probability(self.likelihood.features(maps, self._particles))
+        probs = self._weigh_by_motion(probs)
         estimate, top = self._estimate(probs)
         diff = float(np.linalg.norm(estimate[:2] - self._box[:2]))
         p_t = float(self.likelihood.probability(self.likelihood.features(maps, estimate[None]))[0])
@@ -276,6 +294,8 @@ class RfTracker:
         if self._coasting:
             jump = max(jump, 2.0 * self._search_sigma())
         branch = choose_branch(diff, jump, p_t, u_min, u_max)
+        if self._is_still(estimate) and branch in (Branch.LEARN, Branch.PARTIAL_OCCLUSION):
+            branch = Branch.FULL_OCCLUSION  # on something that does not move: not the target
         self.branch = branch
         self._confidence = p_t
         if branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION:
@@ -319,11 +339,11 @@ class RfTracker:
         if not factor > 0 or not np.isfinite(factor):
             raise ValueError(f"rescale factor must be positive, got {factor}")
         cx, cy = center
-        self._apply(
-            np.array(
-                [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1]]
-            )
+        zoom = np.array(
+            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
         )
+        self._apply(zoom)
+        self._motion.transform(zoom)
 
     # -- steps ----------------------------------------------------------------------------
 
@@ -381,6 +401,25 @@ class RfTracker:
         weights = probs / total if total > 0 else np.full(probs.shape, 1.0 / probs.size)
         idx = weighted_resample(weights, self._resampling, self._rng)
         self._particles = self._particles[idx]
+
+    def _weigh_by_motion(self, probs: FloatArray) -> FloatArray:
+        """The particles' P weighted by the motion in a box of the target's size on each
+        (`RfConfig.motion_floor`): sizes are left to the forests, since a smaller box on
+        the walker holds a larger share of moving pixels."""
+        if not self._camera_still:
+            return probs
+        centres = self._particles.copy()
+        centres[:, 2:] = self._box[2:]
+        floor = self._rf_config.motion_floor
+        weights = motion_weights(
+            self._motion.moving_fraction(centres), floor, self._still.min_fraction
+        )
+        return probs if weights is None else probs * weights
+
+    def _is_still(self, box: FloatArray) -> bool:
+        """Whether nothing moved in `box` for `RfConfig.still_frames` frames in a row."""
+        moved = self._motion.moving_fraction(box[None])
+        return self._still.count(None if moved is None else float(moved[0]))
 
     @property
     def _coasting(self) -> bool:

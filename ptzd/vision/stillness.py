@@ -6,7 +6,9 @@ target, and no colour test can tell them apart. What tells them apart is that pe
 and poles do not: `MotionMap` warps the previous frame into this one by the camera motion
 the daemon already hands the tracker (ego-motion, zoom), and marks the pixels that still
 differ. The tracker asks what share of a box moved (`moving_fraction`, from an integral
-image: any number of boxes at once).
+image: any number of boxes at once). `StillCounter` lets a tracker go of a box in which
+nothing moved for a while; `motion_weights` tilts the learned trackers' particle weights
+towards the boxes in which something moves.
 """
 
 from __future__ import annotations
@@ -105,3 +107,43 @@ class MotionMap:
         area = np.maximum((x1 - x0) * (y1 - y0), 1)
         fraction: FloatArray = count / area
         return fraction
+
+
+class StillCounter:
+    """Counts the frames in a row in which a tracker's box did not move: `count` says when
+    there were `frames` of them (0 turns the test off). Unknown motion (the first frame, a
+    new frame size) neither counts nor resets."""
+
+    def __init__(self, frames: int, min_fraction: float) -> None:
+        self.frames = frames
+        self.min_fraction = min_fraction
+        self.run = 0
+
+    def reset(self) -> None:
+        self.run = 0
+
+    def count(self, moved: float | None) -> bool:
+        """Add this frame's moving fraction of the box; whether the box is still."""
+        if moved is None:
+            return False
+        self.run = self.run + 1 if moved < self.min_fraction else 0
+        return bool(self.frames) and self.run >= self.frames
+
+
+def motion_weights(
+    moved: FloatArray | None, floor: float, min_fraction: float
+) -> FloatArray | None:
+    """Per-box weights in [floor, 1] from the boxes' moving fractions: 1 for the box in which
+    most moved, `floor` for boxes in which nothing did, the square root of the share of the
+    most in between (a box half on the walker still counts for much).
+
+    None - no evidence, leave the likelihood alone - when motion is unknown or under
+    `min_fraction` moved in every box: a target standing still, or hidden, is then judged
+    on its appearance alone, as it would be without this."""
+    if moved is None or floor >= 1.0:
+        return None
+    top = float(moved.max()) if moved.size else 0.0
+    if top < min_fraction:
+        return None
+    weights: FloatArray = floor + (1.0 - floor) * np.sqrt(moved / top)
+    return weights
