@@ -233,6 +233,8 @@ class RfTracker:
         self._initialised = False
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold)
+        # with both rules off (the seed's tracker) the map is never fed: no per-frame cost
+        self._uses_motion = rf.motion_floor < 1.0 or rf.still_frames > 0
         self._camera_still = True  # no image motion handed in with the last frame
         self._still = StillCounter(rf.still_frames, still.min_moving_fraction)
         resample_share = rf.top_particles / rf.num_particles
@@ -276,7 +278,8 @@ class RfTracker:
         homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
         if homography is not None:
             self._apply(homography)
-        self._motion.update(frame, homography)
+        if self._uses_motion:
+            self._motion.update(frame, homography)
         # while the camera turns, the image motion handed in is the commanded one, a little
         # off the real; the background's edges then "move" and would draw the particles
         self._camera_still = homography is None or bool(np.allclose(homography, np.eye(3)))
@@ -406,11 +409,11 @@ class RfTracker:
         """The particles' P weighted by the motion in a box of the target's size on each
         (`RfConfig.motion_floor`): sizes are left to the forests, since a smaller box on
         the walker holds a larger share of moving pixels."""
-        if not self._camera_still:
+        floor = self._rf_config.motion_floor
+        if floor >= 1.0 or not self._camera_still:
             return probs
         centres = self._particles.copy()
         centres[:, 2:] = self._box[2:]
-        floor = self._rf_config.motion_floor
         weights = motion_weights(
             self._motion.moving_fraction(centres), floor, self._still.min_fraction
         )
