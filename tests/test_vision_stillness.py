@@ -97,8 +97,9 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
     [
         TrackerConfig(stillness={"still_frames": 25}),
         TrackerConfig(kind="rf", rf={"still_frames": 25}),
+        TrackerConfig(kind="svm", svm={"still_frames": 25}),
     ],
-    ids=["color", "rf"],
+    ids=["color", "rf", "svm"],
 )
 def test_a_still_box_is_let_go_while_the_zoom_hunts(config: TrackerConfig) -> None:
     # a still object with the zoom stepping in and out on it every few seconds: each step

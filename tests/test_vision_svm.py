@@ -198,6 +198,49 @@ def test_a_held_box_reports_no_motion_and_the_drift_resumes_after() -> None:
     assert tracker._velocity[0] > 6.0  # kept for the particles when he turns up again
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_scan_finds_the_walker_where_he_comes_out(seed: int) -> None:
+    # 42 frames behind a 60 px bar: the box waits where he went in; he comes out 3.5 box
+    # widths away, beyond the particle cloud, but inside the scan's grown radius
+    scene = Scene(velocity=(2.0, 0.0), start=(40.0, 90.0, 24.0, 60.0), occluder_x=(120, 180))
+    ends = {}
+    for scan_after in (3, 0):
+        config = TrackerConfig(kind="svm", seed=seed, svm={"scan_after": scan_after})
+        tracker = SvmTracker(config)
+        tracker.init(scene.frame(0), scene.truth(0))
+        results = [tracker.update(scene.frame(t)) for t in range(1, 110)]
+        assert max(iou(r.box, scene.truth(t)) for t, r in enumerate(results[40:60], 41)) < 0.1
+        ends[scan_after] = (results[-1].state, iou(results[-1].box, scene.truth(109)))
+    assert ends[3][0] is TrackState.TRACKING and ends[3][1] > 0.6
+    assert ends[0] == (TrackState.LOST, 0.0)
+
+
+def test_a_still_look_alike_is_let_go_and_the_walker_found() -> None:
+    # a walker leaving a still figure in his colours where he started: LK and the SVM stay
+    # on the figure; the still rule lets go of it and the scan finds him (it takes only
+    # boxes in which something moved, or it would find the figure again)
+    scene = Scene(velocity=(1.5, 0.0))
+    frames = []
+    for t in range(80):
+        frame = scene.frame(t)
+        draw_person(frame, scene.start, (40, 40, 200), (160, 60, 20))
+        frames.append(frame)
+    end = scene.truth(79)
+    outcome: dict[str, list[tuple[TrackState, float, float]]] = {}
+    for name, svm in [("shipped", {}), ("no still rule", {"still_frames": 0}),
+                      ("no scan", {"scan_after": 0})]:  # fmt: skip
+        outcome[name] = []
+        for seed in range(3):
+            tracker = SvmTracker(TrackerConfig(kind="svm", seed=seed, svm=svm))
+            tracker.init(frames[0], scene.truth(0))
+            for frame in frames[1:]:
+                result = tracker.update(frame)
+            outcome[name].append((result.state, iou(result.box, end), iou(result.box, scene.start)))
+    assert all(s is TrackState.TRACKING and w > 0.6 for s, w, _ in outcome["shipped"])
+    assert all(s is TrackState.TRACKING and t > 0.6 for s, _, t in outcome["no still rule"])
+    assert all(s is TrackState.LOST and t > 0.6 for s, _, t in outcome["no scan"])
+
+
 def test_retrains_after_15_new_positives_and_tracks() -> None:
     scene = Scene()
     tracker = SvmTracker(TrackerConfig(kind="svm"))

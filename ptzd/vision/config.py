@@ -305,6 +305,21 @@ class SvmConfig(StrictModel):
     # Beyond the seed: the PF's particles drift by the target's velocity (learned from the
     # frames with confidence > h2) before the random walk; false = the seed's random walk.
     velocity_drift: bool = True
+    # Beyond the seed: after `scan_after` frames in a row without a confident box (P <= h2),
+    # the SVM also scores a grid of boxes (steps of `scan_step` box sizes) within `scan_radius`
+    # box widths of the box, the radius growing by `scan_growth` widths a frame up to
+    # `scan_max_radius`; a box there with P above h2 and above the PF's estimate is taken (the
+    # walker who came out of an occlusion away from where the cloud waits). 0 = the seed.
+    scan_after: int = Field(default=3, ge=0, le=10_000)
+    scan_step: float = Field(default=0.25, gt=0.0, le=2.0)
+    scan_radius: float = Field(default=1.0, ge=0.0, le=20.0)
+    scan_growth: float = Field(default=0.1, ge=0.0, le=5.0)
+    scan_max_radius: float = Field(default=8.0, ge=0.0, le=20.0)
+    # Beyond the seed: a box in which nothing moved for `still_frames` frames in a row is not
+    # the target (LK and the SVM both hold on to a look-alike that does not move), so it
+    # counts as occluded, and the scan takes only boxes in which something moved; the
+    # thresholds are `[tracker.stillness]`'s. 0 = off.
+    still_frames: int = Field(default=15, ge=0, le=10_000)
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

@@ -11,6 +11,13 @@ eq. 10) while its variance-normalised SSD error stays under h1; above it the par
 takes over until the tracked patch's confidence exceeds h2, when LK restarts from a fresh
 template. Patches tracked with error < h1 or confidence > h2 - and confidence > h2 - join
 the positives; after 15 new ones the SVM is retrained (with fresh background negatives).
+
+Beyond the seed, two rules for occlusions, where LK and the PF wait where the target went
+out of sight: after a few frames without a confident box the SVM scores a grid of boxes
+around the held box, growing with the wait, and a box it is confident of on two frames
+running is taken (`SvmConfig.scan_after`); and a box in which nothing moved for
+`SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
+which something moved (ptzd/vision/stillness.py).
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import VELOCITY_SMOOTHING, apply_homography, ego_motion_matrix
 from ptzd.vision.rf import sample_negatives
+from ptzd.vision.stillness import MotionMap, StillCounter
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0
@@ -218,6 +226,8 @@ class SvmTracker:
             config.svm.template_size, config.svm.lk_iterations, config.svm.lk_motion
         )
         self._rng = np.random.default_rng(config.seed)
+        self._motion = MotionMap(config.stillness.diff_threshold)
+        self._still = StillCounter(config.svm.still_frames, config.stillness.min_moving_fraction)
         self._box: FloatArray = np.zeros(4)
         self._reference: FloatArray = np.ones(2)  # init (w, h), rescaled on zoom
         self._velocity: FloatArray = np.zeros(2)
@@ -230,6 +240,8 @@ class SvmTracker:
         self._state = TrackState.LOST
         self._confidence = 0.0
         self._occluded = 0
+        self._unsure = 0  # frames in a row without a confident box
+        self._candidate: FloatArray | None = None  # the last scan's find
         self._initialised = False
 
     @property
@@ -258,6 +270,10 @@ class SvmTracker:
         self._state = TrackState.TRACKING
         self._confidence = 1.0
         self._occluded = 0
+        self._unsure = 0
+        self._candidate = None
+        self._motion.reset(frame)
+        self._still.reset()
         self._initialised = True
 
     def _jitter(self, box: FloatArray, count: int, shift: float, scale: float) -> FloatArray:
@@ -284,8 +300,11 @@ class SvmTracker:
         if not self._initialised:
             raise RuntimeError("init() the tracker before update()")
         cfg = self._svm_config
-        if ego_motion is not None:
-            self._apply(ego_motion_matrix(ego_motion))
+        homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
+        if homography is not None:
+            self._apply(homography)
+        if cfg.still_frames:
+            self._motion.update(frame, homography)
         bgr, grey = to_bgr(frame), to_grey(frame)
         if self.mode is Mode.LK:
             self.lk_error = self.lk.track(grey)
@@ -300,8 +319,29 @@ class SvmTracker:
                 self._start_particles()
         if self.mode is Mode.PF:
             box, confidence = self._particle_step(bgr)
-        self._confidence = confidence
+        if self._is_still(box):
+            confidence = 0.0  # on something that does not move: not the target
+        jumped = False
         if confidence > cfg.confidence:
+            self._unsure = 0
+            self._candidate = None
+        else:
+            self._unsure += 1
+            if cfg.scan_after and self._unsure >= cfg.scan_after:
+                found = self._scan(bgr)
+                previous, self._candidate = self._candidate, None if found is None else found[0]
+                if (
+                    found is not None
+                    and found[1] > confidence
+                    and previous is not None
+                    and np.all(np.abs(found[0][:2] - previous[:2]) <= 0.5 * found[0][2:])
+                ):
+                    box, confidence = found
+                    jumped = True
+                    self.mode = Mode.PF  # so step 7 below restarts LK from the found box
+                    self._still.reset()
+        self._confidence = confidence
+        if confidence > cfg.confidence and not jumped:
             # the velocity learns only from confident frames: a box the SVM doubts (on
             # a look-alike, or lagging the walker) must not steer the particles
             a = VELOCITY_SMOOTHING
@@ -327,6 +367,38 @@ class SvmTracker:
             if self.new_positives >= cfg.retrain_after:
                 self._retrain(bgr)
         return self._result()
+
+    def _scan(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
+        """The best box of a grid around the held box, if the SVM is confident of it."""
+        cfg = self._svm_config
+        radius = min(
+            cfg.scan_max_radius, cfg.scan_radius + cfg.scan_growth * (self._unsure - cfg.scan_after)
+        )
+        w, h = self._box[2:]
+        step = cfg.scan_step
+        dx = np.arange(-radius, radius + 1e-9, step) * w
+        dy = np.arange(-0.5, 0.5 + 1e-9, step) * h
+        gx, gy = np.meshgrid(self._box[0] + dx, self._box[1] + dy)
+        keep = (gx >= 0) & (gx < bgr.shape[1]) & (gy >= 0) & (gy < bgr.shape[0])
+        if not keep.any():
+            return None
+        grid = np.column_stack([gx[keep], gy[keep], np.full(keep.sum(), w), np.full(keep.sum(), h)])
+        prob = self.model.probability(self._features(bgr, grid))
+        if cfg.still_frames:
+            moved = self._motion.moving_fraction(grid)
+            if moved is not None:
+                prob = np.where(moved >= self._still.min_fraction, prob, 0.0)
+        best = int(np.argmax(prob))
+        if prob[best] <= cfg.confidence:
+            return None
+        return grid[best], float(prob[best])
+
+    def _is_still(self, box: FloatArray) -> bool:
+        """Whether nothing moved in `box` for `still_frames` frames in a row."""
+        if not self._svm_config.still_frames:
+            return False
+        moved = self._motion.moving_fraction(box[None])
+        return self._still.count(None if moved is None else float(moved[0]))
 
     def _start_particles(self) -> None:
         """Hand over from LK to the learned PF: a particle cloud around the last box."""
@@ -381,11 +453,11 @@ class SvmTracker:
         if not factor > 0 or not np.isfinite(factor):
             raise ValueError(f"rescale factor must be positive, got {factor}")
         cx, cy = center
-        self._apply(
-            np.array(
-                [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1]]
-            )
+        zoom = np.array(
+            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
         )
+        self._apply(zoom)
+        self._motion.transform(zoom)
 
     def _apply(self, homography: FloatArray) -> None:
         zeros = np.zeros((self._particles.shape[0], 2))
