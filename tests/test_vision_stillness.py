@@ -10,7 +10,7 @@ import pytest
 from ptzd.vision.config import TrackerConfig
 from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
 from ptzd.vision.tracking import TrackState, make_tracker
-from tests.vision_helpers import Frame, Scene, draw_person, iou
+from tests.vision_helpers import Scene, twin_outcomes
 
 
 def centre(box: tuple[float, float, float, float]) -> np.ndarray:
@@ -141,34 +141,13 @@ def test_the_still_counter_counts_still_frames_in_a_row() -> None:
     assert not any(off.count(0.0) for _ in range(20))
 
 
-def _twin_scene() -> tuple[Scene, list[Frame]]:
-    """A walker leaving behind a still twin (a figure in his colours where he started)."""
-    scene = Scene(velocity=(2.5, 0.0))
-    frames = []
-    for t in range(60):
-        frame = scene.frame(t)
-        draw_person(frame, scene.start, (40, 40, 200), (160, 60, 20))
-        frames.append(frame)
-    return scene, frames
-
-
 def test_rf_follows_the_walker_not_his_still_twin() -> None:
-    scene, frames = _twin_scene()
-    end = scene.truth(len(frames) - 1)
-    outcome: dict[str, list[tuple[TrackState, float, float]]] = {}
-    for name, rf in [
-        ("motion", {}),
-        ("appearance only", {"motion_floor": 1.0, "still_frames": 0}),
-        ("still test only", {"motion_floor": 1.0}),
-    ]:
-        outcome[name] = []
-        for seed in range(5):
-            tracker = make_tracker(TrackerConfig(kind="rf", seed=seed, rf=rf))
-            tracker.init(frames[0], scene.truth(0))
-            for frame in frames[1:]:
-                result = tracker.update(frame)
-            on_walker, on_twin = iou(result.box, end), iou(result.box, scene.start)
-            outcome[name].append((result.state, on_walker, on_twin))
+    variants = {
+        "motion": {},
+        "appearance only": {"motion_floor": 1.0, "still_frames": 0},
+        "still test only": {"motion_floor": 1.0},
+    }
+    outcome = twin_outcomes(2.5, 60, "rf", variants, seeds=5)
     # with the motion weights every seed follows him
     assert all(s is TrackState.TRACKING and w > 0.5 for s, w, _ in outcome["motion"])
     # on appearance alone the twin is as good: some seeds stay on it, tracking it

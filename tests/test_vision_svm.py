@@ -23,7 +23,7 @@ from ptzd.vision.svm import (
     platt_probability,
 )
 from ptzd.vision.tracking import TrackState
-from tests.vision_helpers import Scene, draw_person, iou
+from tests.vision_helpers import Scene, draw_person, iou, twin_outcomes
 
 REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
 
@@ -219,23 +219,8 @@ def test_a_still_look_alike_is_let_go_and_the_walker_found() -> None:
     # a walker leaving a still figure in his colours where he started: LK and the SVM stay
     # on the figure; the still rule lets go of it and the scan finds him (it takes only
     # boxes in which something moved, or it would find the figure again)
-    scene = Scene(velocity=(1.5, 0.0))
-    frames = []
-    for t in range(80):
-        frame = scene.frame(t)
-        draw_person(frame, scene.start, (40, 40, 200), (160, 60, 20))
-        frames.append(frame)
-    end = scene.truth(79)
-    outcome: dict[str, list[tuple[TrackState, float, float]]] = {}
-    for name, svm in [("shipped", {}), ("no still rule", {"still_frames": 0}),
-                      ("no scan", {"scan_after": 0})]:  # fmt: skip
-        outcome[name] = []
-        for seed in range(3):
-            tracker = SvmTracker(TrackerConfig(kind="svm", seed=seed, svm=svm))
-            tracker.init(frames[0], scene.truth(0))
-            for frame in frames[1:]:
-                result = tracker.update(frame)
-            outcome[name].append((result.state, iou(result.box, end), iou(result.box, scene.start)))
+    variants = {"shipped": {}, "no still rule": {"still_frames": 0}, "no scan": {"scan_after": 0}}
+    outcome = twin_outcomes(1.5, 80, "svm", variants, seeds=3)
     assert all(s is TrackState.TRACKING and w > 0.6 for s, w, _ in outcome["shipped"])
     assert all(s is TrackState.TRACKING and t > 0.6 for s, _, t in outcome["no still rule"])
     assert all(s is TrackState.LOST and t > 0.6 for s, _, t in outcome["no scan"])

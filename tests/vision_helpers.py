@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -15,6 +16,8 @@ from numpy.typing import NDArray
 
 from ptzd.metrics import Box as Box
 from ptzd.metrics import iou as iou
+from ptzd.vision.config import TrackerConfig
+from ptzd.vision.tracking import TrackState, make_tracker
 
 Frame = NDArray[np.uint8]
 
@@ -71,3 +74,35 @@ class Scene:
             x0, x1 = self.occluder_x
             img[:, x0:x1] = (128, 128, 128)
         return img
+
+
+def twin_scene(velocity: float, frames: int) -> tuple[Scene, list[Frame]]:
+    """A walker leaving behind a still twin (a figure in his colours where he started)."""
+    scene = Scene(velocity=(velocity, 0.0))
+    out = []
+    for t in range(frames):
+        frame = scene.frame(t)
+        draw_person(frame, scene.start, (40, 40, 200), (160, 60, 20))
+        out.append(frame)
+    return scene, out
+
+
+def twin_outcomes(
+    velocity: float, frames: int, kind: str, variants: dict[str, dict[str, Any]], seeds: int
+) -> dict[str, list[tuple[TrackState, float, float]]]:
+    """Per variant (`kind`'s own config section) and tracker seed, how the tracker ends on a
+    `twin_scene`: its state and its box's IoU with the walker's last box and with the twin."""
+    scene, images = twin_scene(velocity, frames)
+    end = scene.truth(frames - 1)
+    outcome: dict[str, list[tuple[TrackState, float, float]]] = {}
+    for name, section in variants.items():
+        outcome[name] = []
+        for seed in range(seeds):
+            tracker = make_tracker(
+                TrackerConfig.model_validate({"kind": kind, "seed": seed, kind: section})
+            )
+            tracker.init(images[0], scene.truth(0))
+            for image in images[1:]:
+                result = tracker.update(image)
+            outcome[name].append((result.state, iou(result.box, end), iou(result.box, scene.start)))
+    return outcome
