@@ -308,7 +308,7 @@ class SvmConfig(StrictModel):
     # Beyond the seed: after `scan_after` frames in a row without a confident box (P <= h2),
     # the SVM also scores a grid of boxes (steps of `scan_step` box sizes) within `scan_radius`
     # box widths of the box, the radius growing by `scan_growth` widths a frame up to
-    # `scan_max_radius`; a box there with P above h2 and above the PF's estimate is taken (the
+    # `scan_max_radius`; a box there with P above h2 on two frames running is taken (the
     # walker who came out of an occlusion away from where the cloud waits). 0 = the seed.
     scan_after: int = Field(default=3, ge=0, le=10_000)
     scan_step: float = Field(default=0.25, gt=0.0, le=2.0)

@@ -330,9 +330,10 @@ class SvmTracker:
             if cfg.scan_after and self._unsure >= cfg.scan_after:
                 found = self._scan(bgr)
                 previous, self._candidate = self._candidate, None if found is None else found[0]
+                # taken when found on two frames running (once, it was half a body low on
+                # legs and ground as often as on the walker)
                 if (
                     found is not None
-                    and found[1] > confidence
                     and previous is not None
                     and np.all(np.abs(found[0][:2] - previous[:2]) <= 0.5 * found[0][2:])
                 ):
@@ -467,6 +468,8 @@ class SvmTracker:
         self._box, self._velocity = box[0], vel[0]
         self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
         self.lk.warp = homography @ self.lk.warp
+        if self._candidate is not None:  # the last scan's find moves with the image too
+            self._candidate = apply_homography(homography, self._candidate[None], zeros[:1])[0][0]
 
     def _result(self) -> TrackResult:
         cx, cy, w, h = (float(v) for v in self._box)
