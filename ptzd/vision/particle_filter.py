@@ -93,6 +93,16 @@ def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
     raise ValueError(f"ego_motion must be a shift (2,) or an invertible 3x3, got {m.shape}")
 
 
+def zoom_homography(factor: float, center: tuple[float, float]) -> FloatArray:
+    """The image scaled by `factor` about `center` (a zoom step); ValueError unless factor > 0."""
+    if not factor > 0 or not np.isfinite(factor):
+        raise ValueError(f"rescale factor must be positive, got {factor}")
+    cx, cy = center
+    return np.array(
+        [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0.0, 0.0, 1.0]]
+    )
+
+
 def ar2_drift(centres: deque[FloatArray]) -> FloatArray:
     """Ko 2013 eq. 13: the mean of the last two track velocities, floored to pixels."""
     c = list(centres)
@@ -264,12 +274,7 @@ class ParticleTracker:
         return self._result()
 
     def rescale(self, factor: float, center: tuple[float, float]) -> None:
-        if not factor > 0 or not np.isfinite(factor):
-            raise ValueError(f"rescale factor must be positive, got {factor}")
-        cx, cy = center
-        zoom = np.array(
-            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
-        )
+        zoom = zoom_homography(factor, center)
         self._apply(zoom)
         if self._motion is not None:
             self._motion.transform(zoom)

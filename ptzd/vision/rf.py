@@ -53,6 +53,7 @@ from ptzd.vision.particle_filter import (
     ar2_drift,
     ego_motion_matrix,
     weighted_resample,
+    zoom_homography,
 )
 from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
@@ -297,7 +298,10 @@ class RfTracker:
         if self._coasting:
             jump = max(jump, 2.0 * self._search_sigma())
         branch = choose_branch(diff, jump, p_t, u_min, u_max)
-        if self._is_still(estimate) and branch in (Branch.LEARN, Branch.PARTIAL_OCCLUSION):
+        if self._still.count_box(self._motion, estimate) and branch in (
+            Branch.LEARN,
+            Branch.PARTIAL_OCCLUSION,
+        ):
             branch = Branch.FULL_OCCLUSION  # on something that does not move: not the target
         self.branch = branch
         self._confidence = p_t
@@ -339,12 +343,7 @@ class RfTracker:
         return float(self.likelihood.probability(self.likelihood.features(maps, centre))[0]) > 0.5
 
     def rescale(self, factor: float, center: tuple[float, float]) -> None:
-        if not factor > 0 or not np.isfinite(factor):
-            raise ValueError(f"rescale factor must be positive, got {factor}")
-        cx, cy = center
-        zoom = np.array(
-            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
-        )
+        zoom = zoom_homography(factor, center)
         self._apply(zoom)
         self._motion.transform(zoom)
 
@@ -418,11 +417,6 @@ class RfTracker:
             self._motion.moving_fraction(centres), floor, self._still.min_fraction
         )
         return probs if weights is None else probs * weights
-
-    def _is_still(self, box: FloatArray) -> bool:
-        """Whether nothing moved in `box` for `RfConfig.still_frames` frames in a row."""
-        moved = self._motion.moving_fraction(box[None])
-        return self._still.count(None if moved is None else float(moved[0]))
 
     @property
     def _coasting(self) -> bool:

@@ -129,6 +129,11 @@ class StillCounter:
         self.run = self.run + 1 if moved < self.min_fraction else 0
         return bool(self.frames) and self.run >= self.frames
 
+    def count_box(self, motion: MotionMap, box: FloatArray) -> bool:
+        """`count` with the moving fraction of centre-form `box` in `motion`."""
+        moved = motion.moving_fraction(box[None])
+        return self.count(None if moved is None else float(moved[0]))
+
 
 def motion_weights(
     moved: FloatArray | None, floor: float, min_fraction: float

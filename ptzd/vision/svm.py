@@ -33,7 +33,12 @@ from sklearn.svm import SVC
 from ptzd.vision.config import LkMotion, SvmConfig, TrackerConfig
 from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
-from ptzd.vision.particle_filter import VELOCITY_SMOOTHING, apply_homography, ego_motion_matrix
+from ptzd.vision.particle_filter import (
+    VELOCITY_SMOOTHING,
+    apply_homography,
+    ego_motion_matrix,
+    zoom_homography,
+)
 from ptzd.vision.rf import sample_negatives
 from ptzd.vision.stillness import MotionMap, StillCounter
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
@@ -319,7 +324,7 @@ class SvmTracker:
                 self._start_particles()
         if self.mode is Mode.PF:
             box, confidence = self._particle_step(bgr)
-        if self._is_still(box):
+        if cfg.still_frames and self._still.count_box(self._motion, box):
             confidence = 0.0  # on something that does not move: not the target
         jumped = False
         if confidence > cfg.confidence:
@@ -394,13 +399,6 @@ class SvmTracker:
             return None
         return grid[best], float(prob[best])
 
-    def _is_still(self, box: FloatArray) -> bool:
-        """Whether nothing moved in `box` for `still_frames` frames in a row."""
-        if not self._svm_config.still_frames:
-            return False
-        moved = self._motion.moving_fraction(box[None])
-        return self._still.count(None if moved is None else float(moved[0]))
-
     def _start_particles(self) -> None:
         """Hand over from LK to the learned PF: a particle cloud around the last box."""
         cfg = self._svm_config
@@ -451,12 +449,7 @@ class SvmTracker:
         return confidence >= self._svm_config.occluded_below
 
     def rescale(self, factor: float, center: tuple[float, float]) -> None:
-        if not factor > 0 or not np.isfinite(factor):
-            raise ValueError(f"rescale factor must be positive, got {factor}")
-        cx, cy = center
-        zoom = np.array(
-            [[factor, 0.0, cx * (1 - factor)], [0.0, factor, cy * (1 - factor)], [0, 0, 1.0]]
-        )
+        zoom = zoom_homography(factor, center)
         self._apply(zoom)
         self._motion.transform(zoom)
 
