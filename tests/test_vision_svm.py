@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ptzd.vision.config import LkMotion, TrackerConfig
-from ptzd.vision.features import ColourTextureMaps, lbp_riu2, rgb_codes
+from ptzd.vision.features import ColourTextureMaps, lbp_riu2, rgb_codes, to_grey
 from ptzd.vision.svm import (
     LucasKanade,
     Mode,
@@ -49,6 +49,31 @@ def test_rgb_bins_and_37_d_histograms() -> None:
     assert h[0, 18] == pytest.approx(1.0)  # r = 2, g = b = 0
     assert h[0, 27 + 8] == pytest.approx(1.0)  # flat texture: LBP code 8
     assert h[1, :27].sum() == pytest.approx(0.25)  # three quarters outside the frame
+
+
+def test_band_histograms_by_hand_and_summing_to_the_whole_box() -> None:
+    img = np.zeros((40, 40, 3), np.uint8)
+    img[:20, :, 2] = 255  # top half red
+    img[20:, :, 0] = 255  # bottom half blue
+    maps = ColourTextureMaps(img, (0, 0, 40, 40), grid=8)
+    box = np.array([[20.0, 20.0, 40.0, 40.0]])
+    bands = maps.histograms(box, parts=2)
+    assert bands.shape == (1, 74)
+    top, bottom = bands[0, :37], bands[0, 37:]
+    assert top[18] == pytest.approx(0.5)  # red (r = 2) fills the top band's half of the mass
+    assert bottom[2] == pytest.approx(0.5)  # blue (b = 2)
+    assert top[:27].sum() == pytest.approx(0.5) and bottom[:27].sum() == pytest.approx(0.5)
+    # any box, any number of bands: the bands add up to the one-band histogram
+    rng = np.random.default_rng(3)
+    noise = rng.integers(0, 256, (60, 50, 3), dtype=np.uint8)
+    maps = ColourTextureMaps(noise, (0, 0, 50, 60), grid=16)
+    boxes = np.column_stack(
+        [rng.uniform(5, 45, 5), rng.uniform(5, 55, 5), rng.uniform(8, 30, (5, 2))]
+    )
+    whole = maps.histograms(boxes)
+    for parts in (2, 3, 5):
+        split = maps.histograms(boxes, parts=parts).reshape(5, parts, 37).sum(axis=1)
+        assert split == pytest.approx(whole)
 
 
 def test_intersection_kernel_by_hand() -> None:
@@ -153,7 +178,8 @@ def test_lk_is_trusted_only_while_the_svm_agrees() -> None:
     draw_person(other, scene.truth(2), (40, 130, 30), (20, 80, 40))
     modes = {}
     for floor in (0.8, 0.0):
-        config = TrackerConfig(kind="svm", svm={"lk_error": 10.0, "lk_min_confidence": floor})
+        svm = {"lk_error": 10.0, "lk_min_confidence": floor, "confidence": 0.8}
+        config = TrackerConfig(kind="svm", svm=svm)
         tracker = SvmTracker(config)
         tracker.init(scene.frame(0), scene.truth(0))
         tracker.update(scene.frame(1))
@@ -162,6 +188,25 @@ def test_lk_is_trusted_only_while_the_svm_agrees() -> None:
         assert tracker.lk_error < 0.05
         modes[floor] = tracker.mode
     assert modes == {0.8: Mode.PF, 0.0: Mode.LK}
+
+
+def test_lk_size_is_checked_by_the_svm() -> None:
+    """A template taken on a box 30 % too big (as a refresh on a slightly large box leaves
+    it) holds LK at that size; the SVM's size check brings the box back to the walker's."""
+    scene = Scene(velocity=(0.0, 0.0))
+    x, y, w, h = scene.truth(0)
+    widths = {}
+    for check in (True, False):
+        tracker = SvmTracker(TrackerConfig(kind="svm", svm={"lk_size_check": check}))
+        tracker.init(scene.frame(0), scene.truth(0))
+        too_big = np.array([x + w / 2, y + h / 2, w * 1.3, h * 1.3])
+        tracker.lk.set_template(to_grey(scene.frame(0)), too_big)
+        for t in range(1, 6):
+            box = tracker.update(scene.frame(t)).box
+            assert tracker.mode is Mode.LK
+        widths[check] = box[2]
+    assert widths[True] == pytest.approx(w, abs=0.5)
+    assert widths[False] == pytest.approx(w * 1.3, abs=0.5)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -281,10 +281,16 @@ class SvmConfig(StrictModel):
     # LK's affine template slid off walkers in vtest.avi (docs/tracking.md).
     lk_error: float = Field(default=0.01, gt=0.0, le=10.0)
     # h2: Platt confidence above which LK resumes and the patch becomes a positive (seed 0.8).
-    confidence: float = Field(default=0.8, ge=0.0, le=1.0)
+    # Ours 0.5: with the box in `parts` bands a walker who turns or walks away scores
+    # 0.5-0.8 on his own box, and at 0.8 the model stopped learning him (docs/tracking.md).
+    confidence: float = Field(default=0.5, ge=0.0, le=1.0)
     # Beyond the seed: LK is trusted only while the SVM gives its box at least this
     # confidence; below, the learned PF takes over as on a large LK error. 0 = the seed.
-    lk_min_confidence: float = Field(default=0.8, ge=0.0, le=1.0)
+    lk_min_confidence: float = Field(default=0.5, ge=0.0, le=1.0)
+    # Beyond the seed: LK's new box size is kept only if the SVM scores it above the
+    # last box's size at LK's centre (a template refreshed on a box a little too big
+    # grows the box frame by frame). false = the seed.
+    lk_size_check: bool = True
     # Beyond the seed (eq. 8 weighs by P itself): particle weights are P ** weight_power.
     weight_power: float = Field(default=16.0, ge=1.0, le=100.0)
     # Below this confidence the target counts as occluded (ours).
@@ -300,6 +306,10 @@ class SvmConfig(StrictModel):
     lk_motion: LkMotion = "scale"
     # Feature sample grid per box side and PF random-walk sigma in box sizes (ours).
     grid: int = Field(default=16, ge=4, le=64)
+    # Beyond the seed: the box's histograms per horizontal band, `parts` bands top to
+    # bottom (37 values each): a whole-box histogram hardly minds where in the box the
+    # walker is, so the box sat half a head low (vtest.avi). 1 = the seed.
+    parts: int = Field(default=2, ge=1, le=8)
     sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)
     sigma_scale: float = Field(default=0.02, ge=0.0, le=1.0)
     # Beyond the seed: the PF's particles drift by the target's velocity (learned from the

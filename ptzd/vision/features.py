@@ -234,7 +234,7 @@ def rgb_codes(bgr: NDArray[np.uint8]) -> NDArray[np.uint8]:
 
 
 class ColourTextureMaps:
-    """Per-pixel RGB and LBP codes over a region; 37-d box histograms on a sample grid."""
+    """Per-pixel RGB and LBP codes over a region; 37-d box histograms (per band) on a grid."""
 
     def __init__(
         self, bgr: NDArray[np.uint8], region: tuple[int, int, int, int], grid: int
@@ -253,8 +253,9 @@ class ColourTextureMaps:
         )
         self._grid = grid
 
-    def histograms(self, boxes: FloatArray) -> FloatArray:
-        """N x 37: the RGB histogram (27) then the LBP histogram (10), each summing to 1."""
+    def histograms(self, boxes: FloatArray, parts: int = 1) -> FloatArray:
+        """N x 37 * parts: per horizontal band of the box (top first) the RGB histogram (27)
+        then the LBP histogram (10); each band's two histograms sum to 1 / parts."""
         n, g = boxes.shape[0], self._grid
         u = (np.arange(g) + 0.5) / g - 0.5
         h, w = self._rgb.shape[0] - 2, self._rgb.shape[1] - 2
@@ -263,10 +264,13 @@ class ColourTextureMaps:
         xi = np.clip(xs, 0, w + 1).astype(np.intp)
         yi = np.clip(ys, 0, h + 1).astype(np.intp) * (w + 2)
         flat = (yi[:, :, None] + xi[:, None, :]).reshape(n, -1)
-        base = np.arange(n)[:, None]
+        # one histogram per (box, band): a sample row's band is row * parts // grid
+        band = np.repeat(np.arange(g) * parts // g, g)
+        base = np.arange(n)[:, None] * parts + band[None, :]
         rgb = self._rgb.ravel().take(flat).astype(np.intp) + base * (RGB_BINS + 1)
         lbp = self._lbp.ravel().take(flat).astype(np.intp) + base * (LBP_BINS + 1)
-        h_rgb = np.bincount(rgb.ravel(), minlength=n * (RGB_BINS + 1)).reshape(n, -1)
-        h_lbp = np.bincount(lbp.ravel(), minlength=n * (LBP_BINS + 1)).reshape(n, -1)
+        size = n * parts
+        h_rgb = np.bincount(rgb.ravel(), minlength=size * (RGB_BINS + 1)).reshape(size, -1)
+        h_lbp = np.bincount(lbp.ravel(), minlength=size * (LBP_BINS + 1)).reshape(size, -1)
         out = np.concatenate([h_rgb[:, :RGB_BINS], h_lbp[:, :LBP_BINS]], axis=1)
-        return out.astype(np.float64) / float(g * g)
+        return out.reshape(n, -1).astype(np.float64) / float(g * g)

@@ -255,7 +255,7 @@ class SvmTracker:
 
     def _features(self, bgr: NDArray[np.uint8], boxes: FloatArray) -> FloatArray:
         maps = ColourTextureMaps(bgr, region_of(boxes, bgr.shape), self._svm_config.grid)
-        return maps.histograms(boxes)
+        return maps.histograms(boxes, self._svm_config.parts)
 
     def init(self, frame: Frame, box: Box) -> None:
         self._box = centre_box(box, check=True)
@@ -317,7 +317,14 @@ class SvmTracker:
             if self.lk_error > cfg.lk_error or not self._sane(box, frame.shape):
                 self._start_particles()
         if self.mode is Mode.LK:
-            confidence = float(self.model.probability(self._features(bgr, box[None]))[0])
+            candidates = box[None]
+            if cfg.lk_size_check:
+                # LK's new size only if the SVM prefers it to the last box's size at LK's
+                # centre: a template refreshed on a box a little too big grows the box
+                candidates = np.vstack([box, np.concatenate([box[:2], self._box[2:]])])
+            prob = self.model.probability(self._features(bgr, candidates))
+            best = int(np.argmax(prob))  # a tie keeps LK's
+            box, confidence = candidates[best], float(prob[best])
             if cfg.lk_min_confidence and confidence < cfg.lk_min_confidence:
                 # LK's template slid off the walker (it still fits the background it now
                 # holds); the SVM no longer agrees: the learned PF takes over this frame
