@@ -236,6 +236,20 @@ def test_feedforward_waits_for_a_confident_track() -> None:
     assert lenient.update(unsure, now=0.0, hfov=30.0).motion.pan > 0
 
 
+def test_feedforward_goes_on_with_the_coasting_track_while_occluded() -> None:
+    # hidden, the tracker coasts on the velocity it learned from its last confident frames:
+    # the dome turns on with it, whatever the (low) confidence of the hidden target
+    hidden = TrackInput(TARGET, (60.0, 0.0), TrackState.OCCLUDED, 0.2, 0.0)
+    decision = _controller().update(hidden, now=0.0, hfov=30.0)
+    assert decision.mode == "coast" and decision.motion.pan > 0
+    assert decision.motion.zoom == Zoom.NONE  # still no zoom on a guess
+    held = _controller(feedforward_while_occluded=False).update(hidden, now=0.0, hfov=30.0)
+    assert held.motion == STOP  # in the stop band, no feed-forward: the seed's pure PID waits
+    # an unsure but visible target is not coasting: the confidence gate still holds
+    unsure = TrackInput(TARGET, (60.0, 0.0), TrackState.TRACKING, 0.2, 0.0)
+    assert _controller().update(unsure, now=0.0, hfov=30.0).motion == STOP
+
+
 def test_without_a_home_preset_going_home_zooms_fully_out_once() -> None:
     ctl = _controller(lost=LostConfig(hold_s=60.0, widen_s=5.0))
     assert ctl.go_home(10.0) is None  # no preset to send...

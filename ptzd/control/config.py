@@ -162,6 +162,10 @@ class ControlConfig(StrictModel):
     feedforward_min_deg_s: float = Field(default=0.3, ge=0.0, le=100.0)
     feedforward_dead_reckoned: bool = False  # also without a pose from the camera (see docs)
     feedforward_min_confidence: float = Field(default=0.8, ge=0.0, le=1.0)
+    # ... except while OCCLUDED: the tracker then coasts on the velocity it learned from its
+    # last confident frames, and the dome turns on with it (false: the PID alone follows the
+    # coasting box, which stands in the stop band while the walker walks out of view)
+    feedforward_while_occluded: bool = True
     reference_width: int = Field(default=720, ge=16, le=7680)
     reference_hfov: float = Field(default=60.0, gt=0.5, lt=179.0)
     linear_max_deg_s: float = Field(default=40.0, gt=0.0, le=1000.0)
