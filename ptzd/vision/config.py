@@ -308,7 +308,7 @@ class SvmConfig(StrictModel):
     grid: int = Field(default=16, ge=4, le=64)
     # Beyond the seed: the box's histograms per horizontal band, `parts` bands top to
     # bottom (37 values each): a whole-box histogram hardly minds where in the box the
-    # walker is, so the box sat half a head low (vtest.avi). 1 = the seed.
+    # walker is, so the box sat an eighth of the walker low (vtest.avi). 1 = the seed.
     parts: int = Field(default=2, ge=1, le=8)
     sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)
     sigma_scale: float = Field(default=0.02, ge=0.0, le=1.0)
