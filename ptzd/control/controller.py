@@ -207,7 +207,7 @@ class PtzController:
         scale = self.gain_scale(hfov)
 
         def axis(zone: int, offset_px: float, v_px_s: float, *, tilt: bool) -> int:
-            feedforward = self._feedforward(v_px_s, hfov, track, coasting=mode == "coast")
+            feedforward = self._feedforward(v_px_s, hfov, track)
             return self._axis_speed(
                 zone, offset_px * to_reference, dt, scale, tilt=tilt, feedforward=feedforward
             )
@@ -268,9 +268,7 @@ class PtzController:
         tallest = max((h for _, h in heights), default=height)
         return height >= zoom.in_min_height_share * tallest
 
-    def _feedforward(
-        self, v_px_s: float, hfov: float, track: TrackInput, *, coasting: bool = False
-    ) -> float:
+    def _feedforward(self, v_px_s: float, hfov: float, track: TrackInput) -> float:
         """The target's own angular rate (deg/s) from its image velocity, times the
         feed-forward gain; 0 below `feedforward_min_deg_s` (a standing person's jitter).
 
@@ -282,9 +280,8 @@ class PtzController:
         cfg = self.config
         if cfg.feedforward <= 0 or not (track.pose_reported or cfg.feedforward_dead_reckoned):
             return 0.0
-        if track.confidence < cfg.feedforward_min_confidence and not (
-            coasting and cfg.feedforward_while_occluded
-        ):
+        coasting = track.state == TrackState.OCCLUDED and cfg.feedforward_while_occluded
+        if track.confidence < cfg.feedforward_min_confidence and not coasting:
             return 0.0
         # degrees per pixel at the view centre: 1/f radians
         rate = math.degrees(v_px_s / focal_length(self.frame_size[0], hfov))
