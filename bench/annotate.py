@@ -265,9 +265,10 @@ def cmd_review(args: argparse.Namespace) -> int:
         # (int(), not round(): a crop must never come out a pixel larger than its tile)
         size = (max(1, min(int((x1 - x0) * scale), int(2 * half_w * scale) + 2)),
                 max(1, min(int((y1 - y0) * scale), tile_h)))  # fmt: skip
-        crop = np.asarray(cv2.resize(crop, size), dtype=np.uint8)
         tile = np.zeros((tile_h + 16, int(2 * half_w * scale) + 2, 3), np.uint8)
-        tile[16 : 16 + crop.shape[0], : crop.shape[1]] = crop
+        if crop.size:  # empty when a coasting `unsure` box has left the image: a black tile
+            crop = np.asarray(cv2.resize(crop, size), dtype=np.uint8)
+            tile[16 : 16 + crop.shape[0], : crop.shape[1]] = crop
         colour = COLOURS.get(source.get(str(f), "auto"), (255, 255, 255))
         p0 = (int((x - x0) * scale), int((y - y0) * scale) + 16)
         p1 = (int((x + w - x0) * scale), int((y + h - y0) * scale) + 16)
