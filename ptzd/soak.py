@@ -570,16 +570,26 @@ def operator_choice(
     record: Mapping[str, Any], truth: GroundTruth
 ) -> tuple[str, list[float]] | None:
     """Whom the soak's operator selects in a `groundtruth_view.jsonl` record: the walker with
-    the biggest box well inside the view (centre 80..560 px across, over 30 px tall) that
-    is fully visible in the wide scene (`truth`'s visibility at the record's video frame);
-    None if nobody is."""
+    the biggest box well inside the view (centre 80..560 px across, over 30 px tall, no
+    edge on the view's border) that is fully visible in the wide scene (`truth`'s
+    visibility at the record's video frame); None if nobody is.
+
+    No edge on the border: the record's boxes are clipped to the view, and a walker close
+    to the dome cut off by the bottom edge has the biggest box (a 5-minute soak selected
+    three of five that way, e.g. 125 x 104 px of head and shoulders); an operator draws his
+    box round a whole person."""
     wide_frame = int(record["video_frame"])  # already wrapped round the looping scene
+    width, height = VIEW
     boxes = {
         walker: box
         for walker, box in record.get("boxes", {}).items()
         if box is not None
         and 80 < box[0] + box[2] / 2 < 560
         and box[3] > 30
+        and box[0] > 0
+        and box[1] > 0
+        and box[0] + box[2] < width
+        and box[1] + box[3] < height
         and fully_visible(truth, int(walker), wide_frame)
     }
     if not boxes:

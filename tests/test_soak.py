@@ -248,7 +248,8 @@ def test_selection_centring_counts_only_while_the_walker_is_in_the_scene() -> No
 def test_the_operator_selects_the_biggest_walker_he_can_see() -> None:
     """Walker 1 is the biggest but behind a hedge at wide frame 7 (visibility 0.3): the
     operator takes walker 2; at frame 8 walker 1 is in the open and is taken; walker 3 is
-    at the view's edge and too small, walker 4 has no visibility map (counted visible)."""
+    at the view's edge and too small, walker 4 has no visibility map (counted visible),
+    walker 6 is taken only while no edge of his box lies on the view's border."""
     truth = GroundTruth((1000, 500), 25.0, tracks={}, visibility={1: {7: 0.3, 8: 1.0}, 2: {7: 1.0}})
     boxes: dict[str, list[float] | None] = {
         "1": [250.0, 100.0, 80.0, 200.0], "2": [300.0, 120.0, 40.0, 100.0],
@@ -261,6 +262,11 @@ def test_the_operator_selects_the_biggest_walker_he_can_see() -> None:
     assert operator_choice(hidden, truth) is None  # nobody fit: no selection this time
     nobody_mapped = {**record, "boxes": {"4": boxes["4"]}}
     assert operator_choice(nobody_mapped, truth) == ("4", boxes["4"])
+    # the biggest box, but cut off by the view's bottom edge (boxes are clipped to the view)
+    cut_off = {**boxes, "6": [200.0, 380.0, 120.0, 100.0]}
+    assert operator_choice({**record, "boxes": cut_off}, truth) == ("2", boxes["2"])
+    inside = {**boxes, "6": [200.0, 370.0, 120.0, 100.0]}
+    assert operator_choice({**record, "boxes": inside}, truth) == ("6", inside["6"])
 
 
 def test_dome_still_needs_the_same_pose_over_the_last_frames() -> None:
