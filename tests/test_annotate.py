@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import cv2
 import numpy as np
 
-from bench.annotate import Spec, follow, foreground
+from bench.annotate import Spec, follow, foreground, main
+from ptzd.sim.groundtruth import GroundTruth, save_ground_truth
 
 
 def _mask(boxes: list[tuple[int, int, int, int]]) -> np.ndarray:
@@ -60,3 +64,27 @@ def test_foreground_marks_changed_pixels_only() -> None:
     frame[50:52, 70:72] = 120  # a 2x2 speck of noise below the threshold
     mask = foreground(frame, background)
     assert mask[25, 27] == 255 and mask[5, 5] == 0 and mask[51, 71] == 0
+
+
+def test_review_draws_a_black_tile_for_a_box_that_has_left_the_image(tmp_path: Path) -> None:
+    """A coasting `unsure` box can leave the image; its tile is black, the sheet is made."""
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (160, 120))
+    for _ in range(3):
+        writer.write(np.full((120, 160, 3), 128, np.uint8))
+    writer.release()
+    boxes = {
+        0: (40.0, 30.0, 20.0, 50.0),
+        1: (120.0, 30.0, 20.0, 50.0),
+        2: (400.0, 30.0, 20.0, 50.0),
+    }
+    gt = tmp_path / "gt.json"
+    save_ground_truth(GroundTruth((160, 120), 10.0, tracks={1: boxes}), gt)
+    out = tmp_path / "sheet.png"
+    argv = ["review", str(gt), "--track", "1", "--video", str(video), "--every", "1"]
+    assert main([*argv, "--columns", "3", "--out", str(out)]) == 0
+    sheet = cv2.imread(str(out))
+    assert sheet is not None
+    third = sheet.shape[1] // 3
+    assert sheet[20:, :third].mean() > 50  # the box in the image: its grey crop
+    assert sheet[20:, 2 * third :].mean() < 5  # black (but for the box outline)
