@@ -411,10 +411,17 @@ def _last_json_lines(path: Path, count: int) -> list[dict[str, Any]]:
     return found[::-1]
 
 
-def _last_json_line(path: Path) -> dict[str, Any] | None:
-    """The last complete JSON line of a file another process is appending to."""
-    lines = _last_json_lines(path, 1)
-    return lines[0] if lines else None
+def shown_record(
+    records: Sequence[Mapping[str, Any]], latency_s: float
+) -> Mapping[str, Any] | None:
+    """Of the simulator's newest ground-truth records (oldest first), the one of the frame
+    the daemon has when a command sent now arrives: the newest at least `latency_s` older
+    than the newest record (the oldest given if none is that old); None if none."""
+    if not records:
+        return None
+    newest = float(records[-1]["t"])
+    shown = [r for r in records if float(r["t"]) <= newest - latency_s]
+    return shown[-1] if shown else records[0]
 
 
 def dome_still(poses: Sequence[Mapping[str, Any]], frames: int) -> bool:
@@ -507,6 +514,7 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
 SIM_CAMERA_LATENCY_S = 0.12
 STILL_FRAMES = 5  # the operator selects on a picture that has stood still this long
 STILL_WAIT_S = 10.0
+SHOWN_LOOKBACK = 10  # records read to find the one shown (0.4 s at 25 fps)
 VIEW = (640, 480)  # the sim-camera's view size ([sim] defaults)
 SETTLE_FRAMES = 75  # 3 s at the scene's 25 fps: the dome turns to a new selection first
 
@@ -827,7 +835,7 @@ class Soak:
 
     async def _select(self, mqtt_port: int, truth: GroundTruth) -> bool:
         """Pick the biggest walker well inside the view and fully visible (ground truth of
-        the sim's latest frame; `truth`, the wide scene's, says who is hidden) and send
+        the frame shown; `truth`, the wide scene's, says who is hidden) and send
         `{"select": box}` over MQTT, as an operator would; whether one was selected.
 
         Fully visible: an operator draws the box on someone he can see. Picked by the size
@@ -835,9 +843,15 @@ class Soak:
         selections in a 1-hour run, 0.14-0.40 of him visible), whose amodal box is mostly
         hedge, and the tracker learnt the hedge.
 
+        The box is the one of the frame the daemon has when the command arrives
+        (`shown_record`): the daemon applies it to the next frame it processes, about
+        `SIM_CAMERA_LATENCY_S` older than the simulator's newest. Taken from the newest, the
+        box was 3 frames ahead: its centre 3-18 px across from the walker's in the frame the
+        daemon had (five selections of a 5-minute soak, walkers 34-85 px wide), and the
+        tracker learnt a slice of background with him.
+
         Only once the dome has stood still for `STILL_FRAMES` frames (or after
-        `STILL_WAIT_S`): the box is from the simulator's newest frame and the daemon applies
-        it to the frame it has, about `SIM_CAMERA_LATENCY_S` older. With the dome turning
+        `STILL_WAIT_S`): before the box above was of the frame shown, with the dome turning
         at 15-20 deg/s, as it was at every first selection, that put the box 20 px beside
         a 19 px wide walker, and the tracker started on the grass."""
         import aiomqtt
@@ -849,7 +863,10 @@ class Soak:
         ):
             await asyncio.sleep(0.1)
             waited += 0.1
-        record = _last_json_line(self.dir / "sim" / "groundtruth_view.jsonl")
+        record = shown_record(
+            _last_json_lines(self.dir / "sim" / "groundtruth_view.jsonl", SHOWN_LOOKBACK),
+            SIM_CAMERA_LATENCY_S,
+        )
         if record is None:
             return False
         choice = operator_choice(record, truth)

@@ -33,6 +33,7 @@ from ptzd.soak import (
     proc_sample,
     rss_trend,
     selection_centring,
+    shown_record,
     virtual_report,
 )
 
@@ -276,3 +277,18 @@ def test_dome_still_needs_the_same_pose_over_the_last_frames() -> None:
     assert not dome_still([*turning, pose, pose, pose], 4)  # the pan changed 4 frames ago
     assert not dome_still([pose, pose], 3)  # too few frames to tell
     assert not dome_still([pose, pose, {**pose, "hfov": 39.0}], 3)  # zooming is moving
+
+
+def test_the_operator_boxes_the_frame_the_daemon_has() -> None:
+    """The daemon applies a selection to the next frame it processes, the camera's latency
+    older than the simulator's newest: that frame's record is the one to box."""
+    records = [{"t": round(0.04 * f, 2), "frame": f} for f in range(10)]  # 25 fps
+
+    def frame(latency_s: float) -> object:
+        record = shown_record(records, latency_s)
+        return None if record is None else record["frame"]
+
+    assert frame(0.12) == 6  # 0.24 <= 0.36 - 0.12
+    assert frame(0.0) == 9
+    assert frame(1.0) == 0  # none that old: the oldest read
+    assert shown_record([], 0.12) is None
