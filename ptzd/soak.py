@@ -851,9 +851,10 @@ class Soak:
         tracker learnt a slice of background with him.
 
         Only once the dome has stood still for `STILL_FRAMES` frames (or after
-        `STILL_WAIT_S`): before the box above was of the frame shown, with the dome turning
-        at 15-20 deg/s, as it was at every first selection, that put the box 20 px beside
-        a 19 px wide walker, and the tracker started on the grass."""
+        `STILL_WAIT_S`): a picture that moves between the frame boxed and the frame the box
+        lands on puts it beside the walker. With the dome turning at 15-20 deg/s, as it was
+        at every first selection, the box (then of the newest frame) lay 20 px beside a
+        19 px wide walker, and the tracker started on the grass."""
         import aiomqtt
 
         camera = self.dir / "sim" / "camera.jsonl"
