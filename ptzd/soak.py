@@ -517,6 +517,7 @@ STILL_WAIT_S = 10.0
 SHOWN_LOOKBACK = 10  # records read to find the one shown (0.4 s at 25 fps)
 VIEW = (640, 480)  # the sim-camera's view size ([sim] defaults)
 SETTLE_FRAMES = 75  # 3 s at the scene's 25 fps: the dome turns to a new selection first
+MIN_REMAINING_FRAMES = SETTLE_FRAMES + 75  # a selection measures at least 3 s of centring
 
 
 def selection_centring(
@@ -526,11 +527,15 @@ def selection_centring(
     (`groundtruth_view.jsonl` lines), as the closed-loop issue measures it: the share of
     frames with the walker's centre in the central cell of the 3x3 grid, and in view.
 
-    Counted from `settle_frames` after each selection until the next one, over the frames
-    in which the walker is in the scene at all (a walker who has walked out of the wide
-    image is nobody's to centre; one the dome lost sight of counts against it)."""
+    Counted from `settle_frames` after each selection until the next selection, over the
+    frames in which the walker is in the scene (one the dome lost sight of counts against
+    it), and only until he first leaves it: a walker who has walked out of the wide image
+    is nobody's to centre, and the one who walks in when the looping scene comes round
+    again is not whom the operator picked (he is off-centre until someone selects him;
+    that counted 0.15 against every selection of the soak's walker 19)."""
     marks = sorted((int(s["frame"]), str(s["walker"])) for s in selections)
     per: dict[int, dict[str, Any]] = {}
+    gone: set[int] = set()  # selections whose walker has left the scene
     errors_x: list[float] = []
     errors_y: list[float] = []
     for line in lines:
@@ -539,11 +544,14 @@ def selection_centring(
             frame, boxes = int(record["frame"]), record["boxes"]
         except (ValueError, KeyError, TypeError):
             continue
-        active = [(f, w) for f, w in marks if f + settle_frames <= frame]
-        if not active:
+        current = [(f, w) for f, w in marks if f <= frame]
+        if not current:
             continue
-        selected_at, walker = active[-1]
+        selected_at, walker = current[-1]
         if walker not in boxes:
+            gone.add(selected_at)
+            continue
+        if frame < selected_at + settle_frames or selected_at in gone:
             continue
         entry = per.setdefault(
             selected_at, {"frame": selected_at, "walker": walker, "frames": 0, "in_view": 0,
@@ -585,9 +593,19 @@ def operator_choice(
     No edge on the border: the record's boxes are clipped to the view, and a walker close
     to the dome cut off by the bottom edge has the biggest box (a 5-minute soak selected
     three of five that way, e.g. 125 x 104 px of head and shoulders); an operator draws his
-    box round a whole person."""
+    box round a whole person.
+
+    And only a walker who stays in the scene `MIN_REMAINING_FRAMES` more (`truth`'s track;
+    one not in it counts as staying): centring is scored from 3 s after a selection until
+    the walker leaves, so one about to leave gives no measure (a 5-minute soak spent three
+    of five selections on walker 2 in his last 60 frames)."""
     wide_frame = int(record["video_frame"])  # already wrapped round the looping scene
     width, height = VIEW
+
+    def stays(walker: str) -> bool:
+        frames = truth.tracks.get(int(walker))
+        return not frames or max(frames) - wide_frame >= MIN_REMAINING_FRAMES
+
     boxes = {
         walker: box
         for walker, box in record.get("boxes", {}).items()
@@ -599,6 +617,7 @@ def operator_choice(
         and box[0] + box[2] < width
         and box[1] + box[3] < height
         and fully_visible(truth, int(walker), wide_frame)
+        and stays(walker)
     }
     if not boxes:
         return None

@@ -236,6 +236,7 @@ def test_selection_centring_counts_only_while_the_walker_is_in_the_scene() -> No
     lines += [line(f, {"1": edge}) for f in range(16, 18)]  # 2 in view, off-centre
     lines += [line(f, {"1": None}) for f in range(18, 20)]  # 2 lost from view
     lines += [line(f, {"2": centre}) for f in range(20, 30)]  # walker 1 left the scene
+    lines += [line(f, {"1": edge}) for f in range(30, 34)]  # the scene loops: not counted
     lines += ["not json", json.dumps({"frame": 31})]  # skipped, not fatal
     lines += [line(f, {"2": None}) for f in range(40, 55)]  # walker 2 selected at 35
     selections: list[dict[str, object]] = [{"frame": 0, "walker": 1}, {"frame": 35, "walker": "2"}]
@@ -250,7 +251,8 @@ def test_the_operator_selects_the_biggest_walker_he_can_see() -> None:
     """Walker 1 is the biggest but behind a hedge at wide frame 7 (visibility 0.3): the
     operator takes walker 2; at frame 8 walker 1 is in the open and is taken; walker 3 is
     at the view's edge and too small, walker 4 has no visibility map (counted visible),
-    walker 6 is taken only while no edge of his box lies on the view's border."""
+    walker 6 is taken only while no edge of his box lies on the view's border and while he
+    stays in the scene long enough to be measured."""
     truth = GroundTruth((1000, 500), 25.0, tracks={}, visibility={1: {7: 0.3, 8: 1.0}, 2: {7: 1.0}})
     boxes: dict[str, list[float] | None] = {
         "1": [250.0, 100.0, 80.0, 200.0], "2": [300.0, 120.0, 40.0, 100.0],
@@ -268,6 +270,12 @@ def test_the_operator_selects_the_biggest_walker_he_can_see() -> None:
     assert operator_choice({**record, "boxes": cut_off}, truth) == ("2", boxes["2"])
     inside = {**boxes, "6": [200.0, 370.0, 120.0, 100.0]}
     assert operator_choice({**record, "boxes": inside}, truth) == ("6", inside["6"])
+    # walker 6 again, but he leaves the scene (his track ends) 100 frames on: too soon
+    leaving = GroundTruth(
+        (1000, 500), 25.0, tracks={6: dict.fromkeys(range(108), (0.0, 0.0, 10.0, 10.0))},
+        visibility=truth.visibility,
+    )  # fmt: skip
+    assert operator_choice({**record, "boxes": inside}, leaving) == ("2", boxes["2"])
 
 
 def test_dome_still_needs_the_same_pose_over_the_last_frames() -> None:
