@@ -62,9 +62,32 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
+# options whose value is a box "X,Y,W,H": a box partly off the frame's left or top edge
+# starts with a minus, which argparse takes for an option unless it is a plain number
+BOX_OPTIONS = ("--init",)
+
+
+def attach_negative_boxes(argv: Sequence[str]) -> list[str]:
+    """`--init -5,100,30,60` as `--init=-5,100,30,60`, so argparse reads it as the value."""
+    out: list[str] = []
+    args = iter(argv)
+    for arg in args:
+        if arg in BOX_OPTIONS:
+            value = next(args, None)
+            if value is not None and value[:1] == "-" and value[1:2].isdigit():
+                out.append(f"{arg}={value}")
+                continue
+            out.append(arg)
+            if value is not None:
+                out.append(value)
+            continue
+        out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(attach_negative_boxes(sys.argv[1:] if argv is None else argv))
     from ptzd.logs import configure_logging
 
     configure_logging(level=args.log_level or "info", fmt=args.log_format or "auto")

@@ -123,3 +123,31 @@ def test_track_accepts_the_simulator_scene(tmp_path: Path) -> None:
     assert list(boxes) == [str(t) for t in range(first, end + 1)]
     proc = _ptzd("track", "synthetic:x", "--init", box, "--out", str(out))
     assert proc.returncode == 2
+
+
+def test_a_box_partly_off_the_left_edge_is_read_as_the_init_value(video, tmp_path: Path) -> None:
+    """`--init -5,...` (argparse would take it for an option) tracks from the clipped box."""
+    path, _ = video
+    out = tmp_path / "out.json"
+    proc = _ptzd("track", str(path), "--init", "-5,10,20,30", "--end", "2", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    boxes = json.loads(out.read_text())["boxes"]
+    assert boxes["0"] == pytest.approx([0.0, 10.0, 15.0, 30.0])  # clipped to the frame
+    assert list(boxes) == ["0", "1", "2"]
+
+
+def test_box_values_with_a_minus_are_attached_to_their_option() -> None:
+    from ptzd.cli import attach_negative_boxes
+
+    assert attach_negative_boxes(["track", "v", "--init", "-5,1,2,3", "--end", "2"]) == [
+        "track", "v", "--init=-5,1,2,3", "--end", "2"
+    ]  # fmt: skip
+    untouched = ["track", "v", "--init", "5,1,2,3", "--out", "-"]
+    assert attach_negative_boxes(untouched) == untouched
+    assert attach_negative_boxes(["track", "--init", "--out", "x"]) == [
+        "track",
+        "--init",
+        "--out",
+        "x",
+    ]
+    assert attach_negative_boxes(["track", "--init"]) == ["track", "--init"]
