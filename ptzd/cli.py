@@ -70,18 +70,11 @@ BOX_OPTIONS = ("--init",)
 def attach_negative_boxes(argv: Sequence[str]) -> list[str]:
     """`--init -5,100,30,60` as `--init=-5,100,30,60`, so argparse reads it as the value."""
     out: list[str] = []
-    args = iter(argv)
-    for arg in args:
-        if arg in BOX_OPTIONS:
-            value = next(args, None)
-            if value is not None and value[:1] == "-" and value[1:2].isdigit():
-                out.append(f"{arg}={value}")
-                continue
+    for arg in argv:
+        if out and out[-1] in BOX_OPTIONS and arg[:1] == "-" and arg[1:2].isdigit():
+            out[-1] = f"{out[-1]}={arg}"
+        else:
             out.append(arg)
-            if value is not None:
-                out.append(value)
-            continue
-        out.append(arg)
     return out
 
 
