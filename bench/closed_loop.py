@@ -10,7 +10,8 @@ time from a frame being rendered to its command being written (tracker included)
 machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
-        [--box-scale 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0] [--jobs 2] [--no-vtest]
+        [--box-scale 1.3] [--box-width 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0]
+        [--jobs 2] [--no-vtest]
 
 `--walkers-of SEED` adds every walker of synthetic:SEED seen for at least 4 s, each
 followed from the frame in which he is first well in view (`ptzd sim --target ID`): the
@@ -19,7 +20,8 @@ population an operator picks from in the soak, deterministic and in process.
 `--box-scale F` plays the vtest cases with every annotated box (the initial one included)
 F times as wide and tall about its centre, clipped to the frame: how much the outcome hangs
 on how tightly someone else drew the boxes (centring is scored on the box centres, which do
-not move).
+not move). `--box-width F` scales the widths alone (on top of `--box-scale`): a box drawn
+round a walker mid-stride, legs apart, or with a margin at the sides only.
 
 The outcome of a case is close to binary (the tracker stays on the target through a
 crossing, or it does not) and which way it goes can hang on the particle filter's random
@@ -55,9 +57,11 @@ def cases(
     scaled_dir: Path | None = None,
     thermal_seeds: tuple[int, ...] = (),
     vtest: bool = True,
+    box_width: float = 1.0,
 ) -> list[tuple[str, str, str | None, int | None]]:
-    """(name, source, ground truth, target) per case; with `box_scale` != 1 the vtest
-    annotations are written, boxes scaled, under `scaled_dir` and played from there.
+    """(name, source, ground truth, target) per case; with `box_scale` != 1 (or
+    `box_width` != 1: widths alone) the vtest annotations are written, boxes scaled, under
+    `scaled_dir` and played from there.
     `thermal_seeds`: the same synthetic scenes seen by a thermal camera (`thermal:SEED`);
     `vtest`: the annotated vtest.avi tracks too, if the video is here."""
     out: list[tuple[str, str, str | None, int | None]] = [
@@ -67,11 +71,11 @@ def cases(
     if vtest and VTEST.exists():
         for gt in sorted((ROOT / "bench" / "annotations").glob("vtest_*.json")):
             doc = json.loads(gt.read_text())
-            if box_scale != 1.0:
+            if box_scale != 1.0 or box_width != 1.0:
                 if scaled_dir is None:
                     raise ValueError("box_scale needs a directory for the scaled annotations")
                 gt = scaled_dir / gt.name
-                gt.write_text(json.dumps(scale_boxes(doc, box_scale)))
+                gt.write_text(json.dumps(scale_boxes(doc, box_scale, box_width)))
             for track in doc["tracks"]:
                 out.append((f"vtest#{track['id']}", str(VTEST), str(gt), int(track["id"])))
     return out
@@ -101,10 +105,10 @@ def walker_cases(
     return out
 
 
-def scale_boxes(doc: dict[str, Any], factor: float) -> dict[str, Any]:
-    """A ground-truth document with every box `factor` times the size about its centre,
-    clipped to the frame (`size`)."""
-    width, height = doc["size"]
+def scale_boxes(doc: dict[str, Any], factor: float, width: float = 1.0) -> dict[str, Any]:
+    """A ground-truth document with every box `factor` times the size (and `width` times
+    wider again) about its centre, clipped to the frame (`size`)."""
+    frame_w, frame_h = doc["size"]
     out: dict[str, Any] = json.loads(json.dumps(doc))
     for track in out["tracks"]:
         for frame, box in track["frames"].items():
@@ -112,8 +116,9 @@ def scale_boxes(doc: dict[str, Any], factor: float) -> dict[str, Any]:
                 continue
             x, y, w, h = box
             cx, cy = x + w / 2, y + h / 2
-            x0, y0 = max(0.0, cx - w * factor / 2), max(0.0, cy - h * factor / 2)
-            x1, y1 = min(width, cx + w * factor / 2), min(height, cy + h * factor / 2)
+            half_w, half_h = w * factor * width / 2, h * factor / 2
+            x0, y0 = max(0.0, cx - half_w), max(0.0, cy - half_h)
+            x1, y1 = min(frame_w, cx + half_w), min(frame_h, cy + half_h)
             scaled = (x0, y0, x1 - x0, y1 - y0)
             track["frames"][frame] = [round(v, 2) for v in scaled]
     return out
@@ -228,6 +233,9 @@ def main() -> None:
     parser.add_argument(
         "--box-scale", type=float, default=1.0, help="vtest boxes this many times as large"
     )
+    parser.add_argument(
+        "--box-width", type=float, default=1.0, help="vtest boxes this many times as wide"
+    )
     parser.add_argument("--no-vtest", action="store_true", help="leave out the vtest.avi tracks")
     parser.add_argument(
         "--jobs",
@@ -240,6 +248,8 @@ def main() -> None:
     args = parser.parse_args()
     if not 0.2 <= args.box_scale <= 5.0:
         parser.error(f"--box-scale must be in [0.2, 5], got {args.box_scale}")
+    if not 0.2 <= args.box_width <= 5.0:
+        parser.error(f"--box-width must be in [0.2, 5], got {args.box_width}")
     if not 1 <= args.jobs <= 64:
         parser.error(f"--jobs must be in [1, 64], got {args.jobs}")
     with tempfile.TemporaryDirectory(prefix="ptzd-gt-") as scaled_dir:
@@ -249,6 +259,7 @@ def main() -> None:
             Path(scaled_dir),
             tuple(args.thermal_seeds),
             vtest=not args.no_vtest,
+            box_width=args.box_width,
         )
         runs = [
             (name, spec, gt, target, tracker_seed, args)
@@ -283,7 +294,8 @@ def main() -> None:
     out = args.out
     out.parent.mkdir(parents=True, exist_ok=True)
     doc = {"duration_s": args.duration, "override": args.override,
-           "box_scale": args.box_scale, "summary": summary, "rows": rows}  # fmt: skip
+           "box_scale": args.box_scale, "box_width": args.box_width,
+           "summary": summary, "rows": rows}  # fmt: skip
     out.write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {out}")
 

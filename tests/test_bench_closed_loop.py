@@ -21,6 +21,16 @@ def test_scale_boxes_keeps_centres_and_clips_to_the_frame() -> None:
     assert doc["tracks"][0]["frames"]["0"] == [40, 20, 10, 40]  # the input is left alone
 
 
+def test_scale_boxes_can_widen_alone() -> None:
+    frames = {"0": [40, 20, 10, 40], "1": [95, 20, 4, 40]}
+    doc: dict[str, Any] = {"size": [100, 80], "fps": 10.0, "tracks": [{"id": 1, "frames": frames}]}
+    wide = scale_boxes(doc, 1.0, width=1.3)["tracks"][0]["frames"]
+    assert wide["0"] == [38.5, 20.0, 13.0, 40.0]  # centre (45, 40), height kept
+    assert wide["1"] == [94.4, 20.0, 5.2, 40.0]  # just inside: 94.4 + 5.2 < 100
+    both = scale_boxes(doc, 1.5, width=1.2)["tracks"][0]["frames"]
+    assert both["0"] == [36.0, 10.0, 18.0, 60.0]
+
+
 def test_cases_play_scaled_copies_of_the_annotations(tmp_path: Path) -> None:
     plain = [c for c in cases([]) if c[2] is not None]
     if not plain:
@@ -30,6 +40,11 @@ def test_cases_play_scaled_copies_of_the_annotations(tmp_path: Path) -> None:
     assert all(Path(c[2] or "").parent == tmp_path for c in scaled)
     with pytest.raises(ValueError, match="directory"):
         cases([], 1.3)
+    (tmp_path / "wide").mkdir()
+    widened = [c for c in cases([], 1.0, tmp_path / "wide", box_width=1.3) if c[2] is not None]
+    assert [c[0] for c in widened] == [c[0] for c in plain]
+    with pytest.raises(ValueError, match="directory"):
+        cases([], box_width=1.3)
 
 
 def test_thermal_cases_are_their_own_class() -> None:
