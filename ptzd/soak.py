@@ -586,9 +586,10 @@ def operator_choice(
     record: Mapping[str, Any], truth: GroundTruth
 ) -> tuple[str, list[float]] | None:
     """Whom the soak's operator selects in a `groundtruth_view.jsonl` record: the walker with
-    the biggest box well inside the view (centre 80..560 px across, over 30 px tall, no
-    edge on the view's border) that is fully visible in the wide scene (`truth`'s
-    visibility at the record's video frame); None if nobody is.
+    the biggest box well inside the view (centre at least an eighth of the view's width from
+    its sides, 80..560 px of the 640, over 30 px tall, no edge on the view's border) that
+    is fully visible in the wide scene (`truth`'s visibility at the record's video frame);
+    None if nobody is.
 
     No edge on the border: the record's boxes are clipped to the view, and a walker close
     to the dome cut off by the bottom edge has the biggest box (a 5-minute soak selected
@@ -610,7 +611,7 @@ def operator_choice(
         walker: box
         for walker, box in record.get("boxes", {}).items()
         if box is not None
-        and 80 < box[0] + box[2] / 2 < 560
+        and width / 8 < box[0] + box[2] / 2 < width * 7 / 8
         and box[3] > 30
         and box[0] > 0
         and box[1] > 0
