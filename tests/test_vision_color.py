@@ -107,6 +107,32 @@ def test_kernel_weighs_the_centre_most() -> None:
     assert seed_grid.weights.min() > 0  # the seed's a = sqrt(w^2+h^2) never reaches zero
 
 
+def test_a_wide_box_s_top_kernel_is_no_wider_than_top_max_aspect() -> None:
+    """A box of aspect 0.8 with top_max_aspect 0.4: the top stripe's kernel spans the middle
+    half of the box's width (|u| < 0.25 box widths) with the full kernel's profile, its sides
+    weigh nothing; the bottom stripe (legs apart) keeps the inscribed ellipse. Boxes no wider,
+    a one-part grid and a limit of 0 keep the plain kernel."""
+    plain = kernel_grid(16, 32, parts=2)
+    wide = kernel_grid(16, 32, aspect=0.8, parts=2, top_max_aspect=0.4)
+    top, bottom = wide.part == 0, wide.part == 1
+    sides = np.abs(wide.u) > 0.25
+    assert wide.weights[np.ix_(top, sides)].sum() == 0.0
+    assert wide.weights[np.ix_(top, ~sides)].min(axis=1).max() > 0
+    half = kernel_grid(8, 32, parts=2).weights[8]
+    middle = wide.weights[8, ~sides]
+    np.testing.assert_allclose(middle / middle.max(), half / half.max())
+    np.testing.assert_allclose(wide.weights[bottom], plain.weights[bottom])
+    for part in range(2):
+        assert wide.weights[wide.part == part].sum() == pytest.approx(1.0)
+    for grid in (
+        kernel_grid(16, 32, aspect=0.4, parts=2, top_max_aspect=0.4),
+        kernel_grid(16, 32, aspect=0.8, parts=2, top_max_aspect=0.0),
+    ):
+        np.testing.assert_array_equal(grid.weights, plain.weights)
+    one_part = kernel_grid(16, 32, aspect=0.8, parts=1, top_max_aspect=0.4)
+    np.testing.assert_array_equal(one_part.weights, kernel_grid(16, 32).weights)
+
+
 def test_likelihood_peaks_at_the_true_box() -> None:
     scene = Scene()
     frame = scene.frame(0)
@@ -257,3 +283,31 @@ def test_weighted_confidence_discounts_background_in_the_box_not_another_person(
     half = weighted.similarity(edge, cut)
     assert half < 0.8
     assert half == pytest.approx(plain.similarity(edge, cut), abs=0.05)
+
+
+@pytest.mark.parametrize("top_max_aspect", [0.0, 0.45])
+def test_what_stands_beside_a_wide_box_s_top_does_not_count(top_max_aspect: float) -> None:
+    """A box 0.7 of its height wide round a figure whose legs are apart: a brown bench
+    beside its shoulders, inside the box, changes the box's score with
+    the kernel inscribed in the box (0), and nothing with the top stripe's kernel limited
+    to 0.45 of the height (the bench lies outside it); the legs, at the sides of the bottom
+    stripe, count either way."""
+    frame = np.full((200, 200, 3), 128, np.uint8)  # grey paving
+    frame[60:100, 90:110] = (40, 40, 40)  # dark top
+    frame[100:140, 82:92] = frame[100:140, 108:118] = (150, 60, 20)  # blue legs apart
+    box = np.array([100.0, 100.0, 56.0, 80.0])  # aspect 0.7
+    config = ColorConfig(top_max_aspect=top_max_aspect, background_weighting=False)
+    likelihood = ColorLikelihood(config, GmmConfig())
+    likelihood.init(frame, box)
+    with_bench = frame.copy()
+    with_bench[62:98, 74:82] = with_bench[62:98, 118:126] = (40, 90, 160)  # wood at his sides
+    without_legs = frame.copy()
+    without_legs[100:140, 82:92] = 128
+    boxes = box[None, :]
+    before = likelihood.log_likelihood(frame, boxes)[0]
+    bench = likelihood.log_likelihood(with_bench, boxes)[0]
+    if top_max_aspect:
+        assert bench == before
+    else:
+        assert bench < before - 1.0
+    assert likelihood.log_likelihood(without_legs, boxes)[0] < before - 1.0  # legs count

@@ -144,20 +144,30 @@ def _split(weights: FloatArray, parts: int) -> tuple[FloatArray, NDArray[np.intp
 
 
 def kernel_grid(
-    cols: int, rows: int, kernel: str = "ellipse", aspect: float = 1.0, parts: int = 1
+    cols: int,
+    rows: int,
+    kernel: str = "ellipse",
+    aspect: float = 1.0,
+    parts: int = 1,
+    top_max_aspect: float = 0.0,
 ) -> SampleGrid:
     """Epanechnikov-weighted grid (seed eq. 6; the constant 3/4 cancels in the normalisation).
 
     `ellipse`: radius 1 on the ellipse inscribed in the box (Comaniciu, Nummiaro);
     `diagonal`: the seed's normalisation a = sqrt(w^2 + h^2) for a box of aspect w/h.
-    With several parts each stripe gets its own kernel, centred on the stripe.
+    With several parts each stripe gets its own kernel, centred on the stripe. The top
+    stripe's ellipse of a box wider than `top_max_aspect` (w/h; 0: no limit) is that many
+    box heights wide, in the middle of the box (ColorConfig.top_max_aspect).
     """
     u = _offsets(cols)
     rows_per_part = rows // parts
     v_local = _offsets(rows_per_part)  # within one stripe, -0.5..0.5 of its height
     v = (np.arange(rows) + 0.5) / rows - 0.5
     if kernel == "ellipse":
-        r2 = (2 * u[None, :]) ** 2 + (2 * np.tile(v_local, parts)[:, None]) ** 2
+        squeeze = np.ones((rows, 1))
+        if parts > 1 and 0 < top_max_aspect < aspect:
+            squeeze[:rows_per_part] = aspect / top_max_aspect
+        r2 = (2 * squeeze * u[None, :]) ** 2 + (2 * np.tile(v_local, parts)[:, None]) ** 2
     else:
         stripe_aspect = aspect * parts
         r2 = ((u[None, :] * stripe_aspect) ** 2 + np.tile(v_local, parts)[:, None] ** 2) / (
@@ -419,7 +429,12 @@ class ColorLikelihood:
         self._box = box.copy()  # before the histograms: it sets the bin image's step
         cfg = self._config
         self._grid = kernel_grid(
-            cfg.grid_cols, cfg.grid_rows, cfg.kernel, aspect=float(box[2] / box[3]), parts=cfg.parts
+            cfg.grid_cols,
+            cfg.grid_rows,
+            cfg.kernel,
+            aspect=float(box[2] / box[3]),
+            parts=cfg.parts,
+            top_max_aspect=cfg.top_max_aspect,
         )
         target = self.histograms(frame, box[None, :])[0]
         self._gmm = GmmTargetModel(_normalised(target[:, : self.n_bins]), self._gmm_config)

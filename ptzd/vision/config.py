@@ -47,6 +47,12 @@ class ColorConfig(StrictModel):
     parts: int = Field(default=2, ge=1, le=8)
     # Epanechnikov kernel radius: ellipse inscribed in the box, or the seed's a = sqrt(w^2+h^2).
     kernel: Literal["ellipse", "diagonal"] = "ellipse"
+    # Beyond the seed: with `parts` >= 2 and the ellipse kernel, the top stripe's ellipse is at
+    # most this many box heights wide (w/h), in the box's middle; 0 = inscribed in the box.
+    # A box drawn round a walker mid-stride is as wide as his legs are apart, and at the
+    # height of his head and shoulders its sides are ground, which then took the model: a
+    # grey walker's box on grey paving went to a bench (docs/tracking.md).
+    top_max_aspect: float = Field(default=0.45, ge=0.0, le=5.0)
     # Likelihood width: weight = exp(-(1 - rho) / (2 sigma^2)) (seed eq. 16).
     sigma: float = Field(default=0.1, gt=0.0, le=10.0)
     # Background-weighted target model (beyond the seed): down-weight colours of the ring
