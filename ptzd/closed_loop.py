@@ -396,6 +396,10 @@ async def run_closed_loop(options: ClosedLoopOptions) -> dict[str, Any]:
     if sim_cfg.start_hfov is not None:
         hfov = min(sim_cfg.zoom_hfov_wide, max(sim_cfg.zoom_hfov_tele, sim_cfg.start_hfov))
         pose0 = replace(pose0, hfov=hfov)
+    if sim_cfg.start_pan is not None:
+        pose0 = replace(pose0, pan=sim_cfg.start_pan)
+    if sim_cfg.start_tilt is not None:
+        pose0 = replace(pose0, tilt=sim_cfg.start_tilt)
     dome = Dome(
         sim_cfg,
         start_time=clock.now(),

@@ -91,6 +91,16 @@ def test_sim_can_start_at_the_widest_pointed_at_the_target(tmp_path: Path) -> No
     assert box[3] < 480 / 6  # a small figure at the widest
     near, box = first_view()
     assert near["hfov"] < 40.0 and box[3] == pytest.approx(480 / 3, rel=0.1)
+    # and from a pose of its own (a soak's, to play one of its selections again): the
+    # target off-centre, right of and below the middle
+    config.write_text(
+        "[sim]\nstart_hfov = 60.0\n"
+        f"start_pan = {wide['pan'] - 10.0}\nstart_tilt = {wide['tilt'] + 5.0}\n"
+    )
+    posed, box = first_view("--config", str(config), "--duration", "0.2")
+    assert posed["pan"] == pytest.approx(wide["pan"] - 10.0)
+    assert posed["tilt"] == pytest.approx(wide["tilt"] + 5.0)
+    assert box[0] + box[2] / 2 > 320 + 50 and box[1] + box[3] / 2 > 240 + 20
 
 
 def test_a_named_synthetic_walker_is_taken_up_once_fully_in_view(tmp_path: Path) -> None:

@@ -65,6 +65,11 @@ class SimConfig(StrictModel):
     # the target (clamped to the lens); None: the FOV that makes the target a third of the
     # view high. The soak's dome starts at the widest, its walkers a ninth of the view high.
     start_hfov: float | None = Field(default=None, gt=0.1, lt=179.0)
+    # in-process (`ptzd sim` with a target): the dome's pan and tilt at the start (degrees);
+    # None: pointed at the target. With start_hfov, a soak's selection is played again
+    # from the pose the soak's dome had (docs/reliability.md).
+    start_pan: float | None = Field(default=None, ge=-360.0, le=360.0)
+    start_tilt: float | None = Field(default=None, ge=-90.0, le=90.0)
 
     @model_validator(mode="after")
     def _check_ranges(self) -> SimConfig:
