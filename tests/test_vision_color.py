@@ -288,10 +288,10 @@ def test_weighted_confidence_discounts_background_in_the_box_not_another_person(
 @pytest.mark.parametrize("top_max_aspect", [0.0, 0.45])
 def test_what_stands_beside_a_wide_box_s_top_does_not_count(top_max_aspect: float) -> None:
     """A box 0.7 of its height wide round a figure whose legs are apart: a brown bench
-    beside its shoulders, inside the box, changes the box's score with
-    the kernel inscribed in the box (0), and nothing with the top stripe's kernel limited
-    to 0.45 of the height (the bench lies outside it); the legs, at the sides of the bottom
-    stripe, count either way."""
+    beside its shoulders, inside the box, changes the box's score with the kernel inscribed
+    in the box (0), and not at all with the top stripe's kernel limited to 0.45 of the
+    height (the bench lies outside it); the legs, at the sides of the bottom stripe, count
+    either way."""
     frame = np.full((200, 200, 3), 128, np.uint8)  # grey paving
     frame[60:100, 90:110] = (40, 40, 40)  # dark top
     frame[100:140, 82:92] = frame[100:140, 108:118] = (150, 60, 20)  # blue legs apart
