@@ -475,3 +475,45 @@ def test_an_occluded_target_s_visible_half_is_followed(threshold: float) -> None
         # the coast walks on to the right, and the tracker gives up
         assert TrackState.LOST in states
         assert centre_error > 40.0
+
+
+def _wall_frame(t: int) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The target walks right behind a wall taller than he is (hidden from t = 34 on); further
+    back, above the wall, someone in the same shirt and other trousers steps on the spot.
+    Returns the frame and that someone's box."""
+    from tests.vision_helpers import background, draw_person
+
+    img = background(320, 240, 0)[:240, :320].copy()
+    draw_person(img, (100.0 + 1.5 * t, 110.0, 24.0, 60.0), (40, 40, 200), (160, 60, 20))
+    img[100:, 150:260] = (128, 128, 128)
+    other = (170.0 + (t % 6 < 3), 44.0, 22.0, 55.0)
+    draw_person(img, other, (40, 40, 200), (30, 160, 30))
+    return img, other
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("max_step_y", [0.2, 20.0])
+def test_a_look_alike_s_top_further_back_is_not_followed(seed: int, max_step_y: float) -> None:
+    occlusion = {"follow_max_step_x": 1.0 if max_step_y < 1 else 20.0,
+                 "follow_max_step_y": max_step_y}  # fmt: skip
+    tracker = make_tracker(TrackerConfig.model_validate({"seed": seed, "occlusion": occlusion}))
+    tracker.init(_wall_frame(0)[0], (100.0, 110.0, 24.0, 60.0))
+    on_the_other = []
+    states = []
+    for t in range(1, 70):
+        frame, (x, y, w, h) = _wall_frame(t)
+        result = tracker.update(frame)
+        bx, by, bw, bh = result.box
+        on_the_other.append(
+            abs(bx + bw / 2 - (x + w / 2)) < 15 and abs(by + bh / 2 - (y + h / 2)) < 25
+        )
+        states.append(result.state)
+    assert TrackState.OCCLUDED in states
+    if max_step_y < 1:
+        # his shirt stands 60 px higher than the hidden target's: not the target's top half
+        assert not any(on_the_other)
+        assert states[-1] is TrackState.LOST
+    else:
+        # without the step limit the box goes up onto his shirt and waits there for good
+        assert sum(on_the_other) >= 20
+        assert states[-1] is TrackState.OCCLUDED

@@ -157,6 +157,13 @@ class OcclusionConfig(StrictModel):
     # and the count towards LOST waits. The top only: a passer-by in the same trousers
     # matched the bottom part and was followed off the target (docs/tracking.md). 0: off.
     follow_part_threshold: float = Field(default=0.75, ge=0.0, le=1.0)
+    # ... and only a half level with the box and near it: the candidate's centre at most
+    # `follow_max_step_x` box widths across and `follow_max_step_y` box heights up or down
+    # from the box it would replace. A walker's own top stays on his row; a look-alike
+    # further back or nearer stands higher or lower (synthetic:0's walker 23, gone behind a
+    # column, was followed 100 px across and 43 px up onto another orange shirt).
+    follow_max_step_x: float = Field(default=1.0, gt=0.0, le=20.0)
+    follow_max_step_y: float = Field(default=0.2, gt=0.0, le=20.0)
     # Beyond the seed, an occluder edge: a target whose similarity sits between
     # similarity_threshold and reacquire_threshold, whose box moved at its learned speed and
     # then nearly stopped within 4 frames, falling `stall_lag` box widths behind, is taken

@@ -246,7 +246,7 @@ class ParticleTracker:
         elif self._stalled and sim < self._config.occlusion.reacquire_threshold:
             sim = 0.0  # still behind the look-alike: only a clean match ends it
         # half of him is in view (his top above a hedge): the box follows that half
-        follows_part = self._shows_a_part(parts)
+        follows_part = self._shows_a_part(parts, candidate)
         self._transition(sim, weakest, follows_part)
         if self._state is not TrackState.OCCLUDED:
             self._stalled = False
@@ -454,15 +454,18 @@ class ParticleTracker:
             TrackState.LOST if self._occluded_frames >= occ.max_frames else TrackState.OCCLUDED
         )
 
-    def _shows_a_part(self, parts: FloatArray) -> bool:
-        """OCCLUDED, and the candidate is a visible part of the target (see
-        OcclusionConfig.follow_part_threshold)."""
-        threshold = self._config.occlusion.follow_part_threshold
-        if not threshold or self._state is not TrackState.OCCLUDED or self._stalled:
+    def _shows_a_part(self, parts: FloatArray, candidate: FloatArray) -> bool:
+        """OCCLUDED, and the `candidate` box, whose parts scored `parts`, is a visible part
+        of the target (see OcclusionConfig.follow_part_threshold and follow_max_step_*)."""
+        occ = self._config.occlusion
+        if not occ.follow_part_threshold or self._state is not TrackState.OCCLUDED:
             return False
-        if len(parts) < 2:
-            return False  # a one-part model has no upper half
-        return bool(float(parts[0]) >= threshold and self._candidate_moved)
+        if self._stalled or len(parts) < 2:
+            return False  # (a one-part model has no upper half)
+        step = np.abs(candidate[:2] - self._box[:2]) / self._box[2:]
+        if step[0] > occ.follow_max_step_x or step[1] > occ.follow_max_step_y:
+            return False  # not level with the box: someone nearer or further back
+        return bool(float(parts[0]) >= occ.follow_part_threshold and self._candidate_moved)
 
     def _moved_enough(self) -> bool:
         """Whether the candidate may end an occlusion as far as motion goes."""
