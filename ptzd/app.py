@@ -75,6 +75,10 @@ LATENCY_SAMPLES = 10_000
 # the watchdog is fed only while a frame and a control tick came within this long
 HEALTH_MAX_AGE_S = 2.0
 STATUS_INTERVAL_S = 5.0
+# poses of the frames the vision worker took, for a select drawn on an older frame: 10 s at
+# 30 fps; and how near in time a remembered frame must be to the one the box was drawn on
+POSE_MEMORY = 300
+DRAWN_FRAME_MATCH_S = 0.25
 
 
 class CommandLink(Protocol):
@@ -209,6 +213,8 @@ class Daemon:
             clock.now(),
         )
         self._pending_box: BoxTuple | None = initial_box
+        self._pending_drawn_at: float | None = None  # capture time of the box's frame
+        self._poses: deque[tuple[float, Pose]] = deque(maxlen=POSE_MEMORY)
         self._drop_target = False
         self._generation = 0  # bumped by select/release: older tracks are ignored
         self._manual = False  # a manual MQTT command is in force: control sends nothing
@@ -230,12 +236,17 @@ class Daemon:
 
     # --- API -----------------------------------------------------------------------------
 
-    def select(self, box: BoxTuple) -> None:
-        """Track the target in `box` (x, y, w, h, view pixels) from the next frame on."""
+    def select(self, box: BoxTuple, drawn_at: float | None = None) -> None:
+        """Track the target in `box` (x, y, w, h, view pixels) from the next frame on.
+
+        `drawn_at`: the capture time (daemon clock) of the frame the box was drawn on; the
+        box is then moved by the camera's motion from that frame to the next (None: the
+        box is taken as drawn on the next frame)."""
         x, y, w, h = box
         if not (w > 0 and h > 0 and all(math.isfinite(v) for v in box)):
             raise ValueError(f"select box must be finite with positive size, got {box}")
         self._pending_box = (float(x), float(y), float(w), float(h))
+        self._pending_drawn_at = drawn_at
         self._drop_target = False
         self._manual = False
         self._generation += 1
@@ -395,6 +406,7 @@ class Daemon:
                 except MailboxClosedError:
                     return
                 pose = self._pose_at(frame)
+                self._poses.append((frame.capture_time, pose))
                 if self.detector is not None and self.acquirer is None:
                     self.acquirer = Acquirer(self.config.acquisition, frame.size)
                 if self._drop_target:
@@ -411,7 +423,8 @@ class Daemon:
                         self.detector.reset()
                         self.acquirer.reset(frame.capture_time)
                 if self._pending_box is not None:
-                    box, self._pending_box = self._pending_box, None
+                    box = self._drawn_box_now(self._pending_box, self._pending_drawn_at, frame)
+                    self._pending_box = None
                     generation = self._generation
                     tracker = own = own or self.tracker_factory()
                     await self._blocking(tracker.init, frame.image, box)
@@ -459,6 +472,25 @@ class Daemon:
                 previous = (frame, pose)
         finally:
             self.tracks.close()
+
+    def _drawn_box_now(self, box: BoxTuple, drawn_at: float | None, frame: FrameItem) -> BoxTuple:
+        """`box`, drawn on the frame captured at `drawn_at`, where the camera's motion since
+        puts it in `frame` (the newest remembered pose). An operator draws on a picture a
+        little old; with the dome turning, the same pixels of the newest frame show
+        something beside the person (the soak's operator, before it waited for a still
+        picture: 20 px beside a 19 px wide walker)."""
+        if drawn_at is None:
+            return box
+        then_time, then = min(self._poses, key=lambda item: abs(item[0] - drawn_at))
+        if abs(then_time - drawn_at) > DRAWN_FRAME_MATCH_S:
+            _log.warning("select_not_moved", reason="no remembered frame near its ts",
+                         age_s=round(frame.capture_time - drawn_at, 3),
+                         remembered_s=round(frame.capture_time - self._poses[0][0], 3))  # fmt: skip
+            return box
+        now = self._poses[-1][1]
+        if then == now:
+            return box
+        return _move_box(view_homography(frame.size, then, now), box)
 
     def _acquire_step(
         self,
@@ -685,7 +717,11 @@ class Daemon:
 
         manual: Command
         if isinstance(command, SelectTarget):
-            self.select(command.bbox)
+            # the epoch time of the frame (as in the track messages) on the daemon's clock
+            drawn_at = None
+            if command.ts is not None:
+                drawn_at = self.clock.now() - (time.time() - command.ts)
+            self.select(command.bbox, drawn_at)
             self._set_autotrack(True)
             return
         if isinstance(command, SetAutotrack):

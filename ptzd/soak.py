@@ -874,7 +874,10 @@ class Soak:
         `STILL_WAIT_S`): a picture that moves between the frame boxed and the frame the box
         lands on puts it beside the walker. With the dome turning at 15-20 deg/s, as it was
         at every first selection, the box (then of the newest frame) lay 20 px beside a
-        19 px wide walker, and the tracker started on the grass."""
+        19 px wide walker, and the tracker started on the grass. The command also carries
+        the boxed frame's time (`"ts"`), so the daemon moves the box by whatever the dome
+        turned between that frame and the one the box lands on (it may start turning again
+        in between: in a 1-hour soak it did 0.28 s after the frame walker 13 was boxed on)."""
         import aiomqtt
 
         camera = self.dir / "sim" / "camera.jsonl"
@@ -884,19 +887,21 @@ class Soak:
         ):
             await asyncio.sleep(0.1)
             waited += 0.1
-        record = shown_record(
-            _last_json_lines(self.dir / "sim" / "groundtruth_view.jsonl", SHOWN_LOOKBACK),
-            SIM_CAMERA_LATENCY_S,
-        )
+        records = _last_json_lines(self.dir / "sim" / "groundtruth_view.jsonl", SHOWN_LOOKBACK)
+        record = shown_record(records, SIM_CAMERA_LATENCY_S)
         if record is None:
             return False
+        # the epoch time of the frame boxed, as the daemon's track messages give it (the
+        # newest record was rendered about now): the daemon moves the box with the dome
+        drawn_ts = time.time() - (float(records[-1]["t"]) - float(record["t"]))
         choice = operator_choice(record, truth)
         if choice is None:
             return False
         walker, box = choice
         with contextlib.suppress(aiomqtt.MqttError):
             async with aiomqtt.Client("127.0.0.1", mqtt_port, timeout=5) as client:
-                payload = json.dumps({"select": [round(v, 1) for v in box]})
+                payload = json.dumps({"select": [round(v, 1) for v in box],
+                                      "ts": round(drawn_ts, 3)})  # fmt: skip
                 await client.publish(f"ptzd/{CAMERA}/ptz", payload.encode(), qos=1)
                 self.selections.append(
                     {"t": round(self.now(), 2), "frame": record["frame"], "walker": walker,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import os
 import time
 import tty
@@ -20,6 +21,7 @@ from ptzd.clock import RealClock
 from ptzd.config import Config, validate_config
 from ptzd.pelco.codec import FrameParser, Motion
 from ptzd.pelco.link import PelcoLink
+from ptzd.sim.camera_model import Pose
 from ptzd.vision.detect.types import Detection
 from ptzd.vision.tracking import Tracker, TrackResult, make_tracker
 
@@ -385,3 +387,67 @@ def test_the_acquirers_boxes_move_with_the_view() -> None:
         view_homography(size, Pose(0.0, 0.0, 60.0), Pose(0.0, 0.0, tele)), (100, 100, 20, 40)
     )
     assert off_centre == pytest.approx((-120.0, -40.0, 40.0, 80.0), abs=0.01)  # centre -> (-100, 0)
+
+
+class PanningCamera:
+    """Frames at 20 fps from a dome panning right at 1 deg a frame, its pose reported with
+    each; remembers (capture time, pose) of every frame it gave."""
+
+    def __init__(self, clock: RealClock) -> None:
+        self.clock = clock
+        self.given: list[tuple[float, Pose]] = []
+
+    async def frames(self) -> AsyncIterator[FrameItem]:
+        index = 0
+        while True:
+            pose = Pose(float(index), 0.0, 60.0)
+            self.given.append((self.clock.now(), pose))
+            yield FrameItem(scene(BOX[0]), self.given[-1][0], index, pose, time.perf_counter())
+            index += 1
+            await asyncio.sleep(0.05)
+
+
+def _x_after_pan(x: float, pan: float) -> float:
+    """Where a pixel column x of a 320 px wide view at 60 deg moves after panning `pan` deg
+    right (on the centre row: rotation about the vertical axis)."""
+    f = SIZE[0] / 2 / math.tan(math.radians(30.0))
+    return SIZE[0] / 2 + f * math.tan(math.atan((x - SIZE[0] / 2) / f) - math.radians(pan))
+
+
+@pytest.mark.parametrize("drawn", ["unsaid", "ts", "too old"])
+async def test_a_box_drawn_on_an_older_frame_moves_with_the_camera(drawn: str) -> None:
+    """`{"select": box, "ts": ...}`: the box of a frame 6 frames old, the dome having turned
+    6 deg since, lands where those pixels are now, not where they were."""
+    from ptzd.mqtt.messages import SelectTarget
+
+    clock = RealClock()
+    log = ItemLog()
+    with pty_pair() as (_master, port):
+        cfg = config(port)
+        async with PelcoLink(cfg.serial, clock=clock) as link:
+            camera = PanningCamera(clock)
+            daemon = Daemon(cfg, source=camera, link=link, clock=clock,
+                            tracker_factory=lambda: make_tracker(cfg.tracker),
+                            observer=log)  # fmt: skip
+            task = asyncio.create_task(daemon.run())
+            await asyncio.sleep(0.6)
+            drawn_time, drawn_pose = camera.given[-6]
+            if drawn == "too old":
+                drawn_time -= 60.0  # before anything remembered: taken as it is
+            ts = None if drawn == "unsaid" else time.time() - (clock.now() - drawn_time)
+            daemon.handle_command(SelectTarget(BOX, ts))
+            await asyncio.sleep(0.3)
+            daemon.request_stop()
+            await asyncio.wait_for(task, 10)
+    first = next(item for item in log.items if item.acquired is not None)
+    assert first.acquired is not None
+    x, y, w, h = first.acquired
+    turned = first.pose.pan - drawn_pose.pan
+    assert turned >= 6.0
+    if drawn == "ts":
+        expected = _x_after_pan(BOX[0] + BOX[2] / 2, turned)
+        assert x + w / 2 == pytest.approx(expected, abs=0.5)
+        assert BOX[0] - (x + w / 2 - BOX[2] / 2) > 25.0  # 6 deg at f = 277 px: 29 px left
+        assert y + h / 2 == pytest.approx(BOX[1] + BOX[3] / 2, abs=1.0)
+    else:
+        assert first.acquired == BOX

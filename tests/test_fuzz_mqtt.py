@@ -25,6 +25,7 @@ payloads = (
     | st.text(max_size=300).map(str.encode)
     | st.tuples(words, st.text(max_size=5)).map(lambda t: (t[0] + t[1]).encode())
     | json_values.map(lambda v: json.dumps({"select": v}).encode())
+    | json_values.map(lambda v: json.dumps({"select": [1, 2, 3, 4], "ts": v}).encode())
     | json_values.map(lambda v: json.dumps(v).encode())
 )
 
@@ -41,6 +42,7 @@ def test_parse_ptz_raises_only_command_error(payload: bytes) -> None:
         _, _, w, h = command.bbox
         assert w > 0 and h > 0
         assert all(abs(v) <= 100_000 for v in command.bbox)
+        assert command.ts is None or 0 < command.ts <= 1e11  # finite seconds since the epoch
     if isinstance(command, GotoPreset):
         assert 1 <= command.number <= 255
 

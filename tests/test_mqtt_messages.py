@@ -66,6 +66,14 @@ def test_topics_match_the_interface_contract() -> None:
         (b"STOP", Stop()),
         (b'{"select":[0,0,1,1]}', SelectTarget((0.0, 0.0, 1.0, 1.0))),
         (b' {"select": [-5, 3.5, 20, 40.25]} ', SelectTarget((-5.0, 3.5, 20.0, 40.25))),
+        (
+            b'{"select": [0, 0, 1, 1], "ts": 1796428800.25}',
+            SelectTarget((0.0, 0.0, 1.0, 1.0), 1796428800.25),
+        ),
+        (
+            b'{"ts": 1796428800, "select": [0, 0, 1, 1]}',
+            SelectTarget((0.0, 0.0, 1.0, 1.0), 1796428800.0),
+        ),
     ],
 )
 def test_parse_ptz_accepts(payload: bytes, expected: object) -> None:
@@ -91,6 +99,15 @@ def test_parse_ptz_accepts(payload: bytes, expected: object) -> None:
         b'{"select": [1, 2, Infinity, 4]}',
         b'{"select": [1, 2, 3, 1' + b"0" * 500 + b"]}",
         b'{"SELECT": [1, 2, 3, 4]}',
+        b'{"select": [1, 2, 3, 4], "ts": "now"}',
+        b'{"select": [1, 2, 3, 4], "ts": -1}',
+        b'{"select": [1, 2, 3, 4], "ts": 0}',
+        b'{"select": [1, 2, 3, 4], "ts": NaN}',
+        b'{"select": [1, 2, 3, 4], "ts": Infinity}',
+        b'{"select": [1, 2, 3, 4], "ts": true}',
+        b'{"select": [1, 2, 3, 4], "ts": 1' + b"0" * 400 + b"}",
+        b'{"select": [1, 2, 3, 4], "ts": 1796428800, "id": 3}',
+        b'{"ts": 1796428800}',
         b"{" * 600,
     ],
 )

@@ -229,9 +229,12 @@ class Stop:
 
 @dataclass(frozen=True)
 class SelectTarget:
-    """`{"select": [x, y, w, h]}`: track the object in this box (view pixels)."""
+    """`{"select": [x, y, w, h]}`: track the object in this box (view pixels); with
+    `"ts"`, seconds since the Unix epoch of the frame it was drawn on (a `TrackMessage`'s
+    `ts`), so the daemon can move the box with the camera since then."""
 
     bbox: BBox
+    ts: float | None = None
 
 
 PtzCommand = GotoPreset | Move | ZoomMove | Stop | SelectTarget
@@ -248,6 +251,7 @@ _WORDS: dict[str, PtzCommand] = {
     "STOP": Stop(),
 }
 MAX_SELECT_COORD = 100_000.0
+MAX_TS = 1e11  # seconds since the epoch: year 5138; a bound that also keeps float() finite
 
 
 def _text(topic: str, payload: bytes, max_bytes: int) -> str:
@@ -279,7 +283,8 @@ def parse_autotrack(topic: str, payload: bytes, *, max_bytes: int = 1024) -> Set
 
 def parse_ptz(topic: str, payload: bytes, *, max_bytes: int = 1024) -> PtzCommand:
     """Frigate's words (`preset_<n>`, `MOVE_LEFT|RIGHT|UP|DOWN`, `ZOOM_IN|OUT`, `STOP`, any
-    case) or a JSON object `{"select": [x, y, w, h]}` with w, h > 0."""
+    case) or a JSON object `{"select": [x, y, w, h]}` with w, h > 0 and optionally
+    `"ts": <seconds since the Unix epoch of the frame the box was drawn on>`."""
     text = _text(topic, payload, max_bytes)
     if text.startswith("{"):
         return _parse_select(topic, text, payload)
@@ -305,8 +310,10 @@ def _parse_select(topic: str, text: str, payload: bytes) -> SelectTarget:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
         raise CommandError(topic, f"malformed JSON: {exc.msg} at {exc.pos}", payload) from None
-    if not isinstance(obj, dict) or set(obj) != {"select"}:
-        raise CommandError(topic, 'JSON command must be exactly {"select": [x, y, w, h]}', payload)
+    if not isinstance(obj, dict) or "select" not in obj or not set(obj) <= {"select", "ts"}:
+        raise CommandError(
+            topic, 'JSON command must be {"select": [x, y, w, h]} with an optional "ts"', payload
+        )
     box = obj["select"]
     if (
         not isinstance(box, list)
@@ -320,4 +327,10 @@ def _parse_select(topic: str, text: str, payload: bytes) -> SelectTarget:
     x, y, w, h = (float(v) for v in box)
     if w <= 0 or h <= 0:
         raise CommandError(topic, "select width and height must be > 0", payload)
-    return SelectTarget((x, y, w, h))
+    ts = obj.get("ts")
+    if ts is None:
+        return SelectTarget((x, y, w, h))
+    # (NaN and infinities fail the bounds; a huge int is compared exactly, not converted)
+    if not isinstance(ts, int | float) or isinstance(ts, bool) or not 0 < ts <= MAX_TS:
+        raise CommandError(topic, "ts must be seconds since the Unix epoch (> 0)", payload)
+    return SelectTarget((x, y, w, h), float(ts))
