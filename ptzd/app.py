@@ -423,7 +423,9 @@ class Daemon:
                         self.detector.reset()
                         self.acquirer.reset(frame.capture_time)
                 if self._pending_box is not None:
-                    box = self._drawn_box_now(self._pending_box, self._pending_drawn_at, frame)
+                    box = self._drawn_box_now(
+                        self._pending_box, self._pending_drawn_at, frame, pose
+                    )
                     self._pending_box = None
                     generation = self._generation
                     tracker = own = own or self.tracker_factory()
@@ -473,9 +475,11 @@ class Daemon:
         finally:
             self.tracks.close()
 
-    def _drawn_box_now(self, box: BoxTuple, drawn_at: float | None, frame: FrameItem) -> BoxTuple:
+    def _drawn_box_now(
+        self, box: BoxTuple, drawn_at: float | None, frame: FrameItem, pose: Pose
+    ) -> BoxTuple:
         """`box`, drawn on the frame captured at `drawn_at`, where the camera's motion since
-        puts it in `frame` (the newest remembered pose). An operator draws on a picture a
+        puts it in `frame` (taken at `pose`). An operator draws on a picture a
         little old; with the dome turning, the same pixels of the newest frame show
         something beside the person (the soak's operator, before it waited for a still
         picture: 20 px beside a 19 px wide walker)."""
@@ -487,10 +491,9 @@ class Daemon:
                          age_s=round(frame.capture_time - drawn_at, 3),
                          remembered_s=round(frame.capture_time - self._poses[0][0], 3))  # fmt: skip
             return box
-        now = self._poses[-1][1]
-        if then == now:
+        if then == pose:
             return box
-        return _move_box(view_homography(frame.size, then, now), box)
+        return _move_box(view_homography(frame.size, then, pose), box)
 
     def _acquire_step(
         self,
