@@ -37,6 +37,7 @@ from typing import Any
 
 from bench.closed_loop import ROOT, run_case
 from ptzd.closed_loop import in_central_cell
+from ptzd.config import merge_tables
 from ptzd.sim.groundtruth import GroundTruth, save_ground_truth
 from ptzd.soak import SCENE, SETTLE_FRAMES, SIM_CAMERA_LATENCY_S
 
@@ -118,12 +119,9 @@ def settled_centring(per_frame: list[dict[str, Any]], settle: int) -> tuple[floa
 def replay_row(selection: Selection, gt_path: str, tracker_seed: int,
                args: argparse.Namespace) -> dict[str, Any]:  # fmt: skip
     """One selection with one tracker seed: the table row."""
-    overrides = json.loads(json.dumps(SOAK_REGIME))
-    overrides["sim"].update(
-        start_pan=selection.pan, start_tilt=selection.tilt, start_hfov=selection.hfov
-    )
-    for section, values in args.override.items():
-        overrides.setdefault(section, {}).update(values)
+    pose = {"sim": {"start_pan": selection.pan, "start_tilt": selection.tilt,
+                    "start_hfov": selection.hfov}}  # fmt: skip
+    overrides = merge_tables(merge_tables(SOAK_REGIME, pose), args.override)
     record = None
     if args.record:
         record = args.record / f"{selection.frame}_w{selection.walker}_t{tracker_seed}"
@@ -160,7 +158,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--jobs must be in [1, 64], got {args.jobs}")
     selections = soak_selections(args.soak_dir)
     if args.frames:
-        selections = [s for s in selections if s.frame in set(args.frames)]
+        wanted = set(args.frames)
+        selections = [s for s in selections if s.frame in wanted]
     if not selections:
         parser.error(f"{args.soak_dir}: no selection with its records to replay")
     from ptzd.sim.sources import open_wide_source

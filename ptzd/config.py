@@ -108,11 +108,12 @@ def env_overrides(environ: Mapping[str, str]) -> dict[str, Any]:
     return tree
 
 
-def _merge(base: dict[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+def merge_tables(base: dict[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+    """`base` with `override` laid over it, table by table (neither is changed)."""
     merged = dict(base)
     for key, value in override.items():
         if isinstance(value, Mapping) and isinstance(merged.get(key), dict):
-            merged[key] = _merge(merged[key], value)
+            merged[key] = merge_tables(merged[key], value)
         else:
             merged[key] = value
     return merged
@@ -142,7 +143,7 @@ def validate_config(
     data: Mapping[str, Any], *, source: str = "<config>", environ: Mapping[str, str] | None = None
 ) -> Config:
     """Validate a parsed TOML document with environment overrides applied on top."""
-    merged = _merge(dict(data), env_overrides(os.environ if environ is None else environ))
+    merged = merge_tables(dict(data), env_overrides(os.environ if environ is None else environ))
     try:
         return Config.model_validate(merged)
     except ValidationError as exc:
