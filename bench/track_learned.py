@@ -29,7 +29,7 @@ import json  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Iterator  # noqa: E402
+from collections.abc import Iterator, Mapping  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -54,9 +54,10 @@ from bench.track import (  # noqa: E402
     synthetic_sequences,
     vtest_sequences,
 )
+from ptzd.config import merge_tables  # noqa: E402
 from ptzd.metrics import Box  # noqa: E402
 from ptzd.sim.groundtruth import load_ground_truth  # noqa: E402
-from ptzd.vision.config import RfConfig, TrackerConfig  # noqa: E402
+from ptzd.vision.config import TrackerConfig  # noqa: E402
 
 LEARNED_CLASSES = ("vtest", "synthetic-static", "synthetic-thermal")
 OCCLUDED_CLASSES = ("synthetic-occluded", "thermal-occluded")
@@ -111,11 +112,14 @@ def _bgr(frame: Frame) -> Frame:
     )
 
 
-def make(name: str, seed: int) -> BenchTracker:
-    if name in ("color", "rf", "svm"):
-        return ConfigTracker(name, TrackerConfig(kind=name, seed=seed))
+def make(name: str, seed: int, override: Mapping[str, Any] | None = None) -> BenchTracker:
+    """A tracker by bench name; `override` is laid over the ptzd trackers' `[tracker]` table."""
+    table: dict[str, Any] = {"kind": name, "seed": seed}
     if name == "rf-static":
-        return ConfigTracker(name, TrackerConfig(kind="rf", seed=seed, rf=RfConfig(online=False)))
+        table = {"kind": "rf", "seed": seed, "rf": {"online": False}}
+    if name in ("color", "rf", "svm", "rf-static"):
+        config = TrackerConfig.model_validate(merge_tables(table, override or {}))
+        return ConfigTracker(name, config)
     if name in PEERS:
         return BgrPeer(name)
     raise SystemExit(f"unknown tracker {name!r}: choose from {', '.join(DEFAULT + PEERS)}")
@@ -246,6 +250,12 @@ def main(argv: list[str] | None = None) -> int:
         help="tracker seeds; with several, each sequence's scores are the means over them",
     )
     parser.add_argument("--no-speed", action="store_true")
+    parser.add_argument(
+        "--override",
+        type=json.loads,
+        default={},
+        help='laid over the ptzd trackers\' [tracker] table, e.g. \'{"rf": {"coast": false}}\'',
+    )
     parser.add_argument("--quick", action="store_true", help="seed 1, one target, 100 frames")
     parser.add_argument("--out", type=Path, default=RESULTS / "track_learned.json")
     args = parser.parse_args(argv)
@@ -291,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
             }
             line = f"{seq.cls:<17} {seq.name:<24} {len(seq.frames):4d} frames:"
             for name in names:
-                runs = [run_tracker(make(name, seed), seq) for seed in args.seed]
+                runs = [run_tracker(make(name, seed, args.override), seq) for seed in args.seed]
                 entry["trackers"][name] = mean_over_seeds(
                     [{**run.score.to_json(), "fps": run.fps} for run in runs]
                 )
@@ -320,6 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {
         "note": "shared 2-core machine: frame rates are noisy; compare trackers of one run",
         "argv": sys.argv[1:] if argv is None else argv,
+        "override": args.override,
         "sequences": results,
         "classes": summary,
         "speed": fps,

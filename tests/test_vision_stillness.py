@@ -142,10 +142,11 @@ def test_the_still_counter_counts_still_frames_in_a_row() -> None:
 
 
 def test_rf_follows_the_walker_not_his_still_twin() -> None:
+    # (the twin wears his colours: the colour vote is off in the forests-only variants)
     variants = {
         "motion": {},
-        "appearance only": {"motion_floor": 1.0, "still_frames": 0},
-        "still test only": {"motion_floor": 1.0},
+        "appearance only": {"motion_floor": 1.0, "still_frames": 0, "colour_weight": 0.0},
+        "still test only": {"motion_floor": 1.0, "colour_weight": 0.0},
     }
     outcome = twin_outcomes(2.5, 60, "rf", variants, seeds=5)
     # with the motion weights every seed follows him

@@ -504,3 +504,56 @@ class ColorLikelihood:
     def rescale(self, factor: float) -> None:
         # Normalised histograms are scale-free; only the remembered box size changes.
         self._box = self._box * np.array([1.0, 1.0, factor, factor])
+
+
+# Channels of a colour frame differing by at most this much are a grey picture (a thermal
+# camera's stream decoded to BGR): its colour model would be the value bins alone.
+_GREY_SPREAD = 2
+
+
+def is_colour(frame: Frame, box: FloatArray) -> bool:
+    """Whether `frame` shows colour in `box` (cx, cy, w, h): three channels that differ."""
+    if frame.ndim == 2 or frame.shape[2] == 1:
+        return False
+    height, width = frame.shape[:2]
+    x0, x1 = np.clip([box[0] - box[2] / 2, box[0] + box[2] / 2 + 1], 0, width).astype(int)
+    y0, y1 = np.clip([box[1] - box[3] / 2, box[1] + box[3] / 2 + 1], 0, height).astype(int)
+    patch = frame[y0:y1, x0:x1].astype(np.int16)
+    if patch.size == 0:
+        return False
+    spread = patch.max(axis=2) - patch.min(axis=2)
+    return bool(spread.max() > _GREY_SPREAD)
+
+
+class ColourVote:
+    """The colour tracker's likelihood as a factor on a learned tracker's particle weights.
+
+    rf's forests see grey levels and texture only, svm's a coarse 27-bin RGB histogram;
+    this adds the colour tracker's GMM-updated, background-weighted HSV model. Off on grey
+    frames (decided at `init`): there its six value bins only blur the learned model."""
+
+    def __init__(self, color: ColorConfig, gmm: GmmConfig, weight: float) -> None:
+        self._likelihood = ColorLikelihood(color, gmm)
+        self._weight = weight
+        self.active = False
+
+    def init(self, frame: Frame, box: FloatArray) -> None:
+        self.active = self._weight > 0 and is_colour(frame, box)
+        if self.active:
+            self._likelihood.init(frame, box)
+
+    def weigh(self, frame: Frame, boxes: FloatArray, weights: FloatArray) -> FloatArray:
+        """`weights` (one per row of `boxes`) times the colour likelihood ** weight."""
+        if not self.active:
+            return weights
+        log = self._likelihood.log_likelihood(frame, boxes)
+        weighted: FloatArray = weights * np.exp(self._weight * (log - log.max()))
+        return weighted
+
+    def adapt(self, frame: Frame, box: FloatArray) -> None:
+        if self.active:
+            self._likelihood.adapt(frame, box)
+
+    def rescale(self, factor: float) -> None:
+        if self.active:
+            self._likelihood.rescale(factor)

@@ -266,6 +266,10 @@ class RfConfig(StrictModel):
     # walker went behind, and then score it above U_min for good (docs/tracking.md).
     motion_floor: float = Field(default=0.2, ge=0.0, le=1.0)
     still_frames: int = Field(default=15, ge=0, le=10_000)
+    # Beyond the seed: on colour frames each particle's P is multiplied by the colour
+    # tracker's likelihood (`tracker.color`) to this power; its model learns on learning
+    # frames. 0 = off (the seed's grey-level forests alone). Off on grey frames.
+    colour_weight: float = Field(default=0.5, ge=0.0, le=10.0)
 
     @model_validator(mode="after")
     def _memory_fits(self) -> RfConfig:
@@ -343,6 +347,10 @@ class SvmConfig(StrictModel):
     # counts as occluded, and the scan takes only boxes in which something moved; the
     # thresholds are `[tracker.stillness]`'s. 0 = off.
     still_frames: int = Field(default=15, ge=0, le=10_000)
+    # Beyond the seed: on colour frames the PF's weights are multiplied by the colour
+    # tracker's likelihood (`tracker.color`) to this power; its model learns from confident
+    # boxes. 0 = off (the seed's SVM alone). Off on grey frames.
+    colour_weight: float = Field(default=2.0, ge=0.0, le=10.0)
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

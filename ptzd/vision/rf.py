@@ -37,6 +37,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from ptzd.vision.color import ColourVote
 from ptzd.vision.config import ResamplingConfig, RfConfig, TrackerConfig
 from ptzd.vision.features import (
     ORIENTATIONS,
@@ -238,6 +239,7 @@ class RfTracker:
         self._uses_motion = rf.motion_floor < 1.0 or rf.still_frames > 0
         self._camera_still = True  # no image motion handed in with the last frame
         self._still = StillCounter(rf.still_frames, still.min_moving_fraction)
+        self._colour = ColourVote(config.color, config.gmm, rf.colour_weight)
         resample_share = rf.top_particles / rf.num_particles
         self._resampling = ResamplingConfig(top_rate=resample_share, method="systematic")
 
@@ -266,6 +268,7 @@ class RfTracker:
         self._motion.reset(frame)
         self._still.reset()
         self._learn(frame, maps)
+        self._colour.init(frame, self._box)
         self._state = TrackState.TRACKING
         self._confidence = 1.0
         self.occluded_frames = 0
@@ -288,7 +291,7 @@ class RfTracker:
         self._predict(frame.shape)
         maps = self.likelihood.maps(frame, self._cover(self._particles))
         probs = self.likelihood.probability(self.likelihood.features(maps, self._particles))
-        probs = self._weigh_by_motion(probs)
+        probs = self._colour.weigh(frame, self._particles, self._weigh_by_motion(probs))
         estimate, top = self._estimate(probs)
         diff = float(np.linalg.norm(estimate[:2] - self._box[:2]))
         p_t = float(self.likelihood.probability(self.likelihood.features(maps, estimate[None]))[0])
@@ -311,6 +314,7 @@ class RfTracker:
             growing = len(self.memory.positives) < self._rf_config.positives
             if self._rf_config.online and (branch is Branch.LEARN or growing):
                 self._learn(frame, maps)
+                self._colour.adapt(frame, self._box)
             self._resample(probs, top)
             self.occluded_frames = 0
             # a learning-grade frame resumes a terminated track (beyond the seed)
@@ -346,6 +350,7 @@ class RfTracker:
         zoom = zoom_homography(factor, center)
         self._apply(zoom)
         self._motion.transform(zoom)
+        self._colour.rescale(factor)
 
     # -- steps ----------------------------------------------------------------------------
 
