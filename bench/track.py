@@ -329,9 +329,9 @@ def opencv_tracker_factory(kind: str) -> Callable[[], Any]:
 class OpenCVTracker:
     """An OpenCV tracker; `update` returning ok=False counts as null."""
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, create: Callable[[], Any] | None = None) -> None:
         self.name = kind
-        self._create = opencv_tracker_factory(kind)
+        self._create = create or opencv_tracker_factory(kind)
         self._tracker: Any = None
 
     def init(self, frame: Frame, box: Box) -> None:
@@ -339,9 +339,18 @@ class OpenCVTracker:
         x0, y0 = round(x), round(y)
         rect = (x0, y0, max(1, round(x + w) - x0), max(1, round(y + h) - y0))
         self._tracker = self._create()
-        self._tracker.init(frame, rect)
+        try:
+            self._tracker.init(frame, rect)
+        except cv2.error as exc:
+            # e.g. CSRT on a walker's first pixel at the frame's edge (synthetic-thermal:2's
+            # second track starts as a 1 x 1 box at x = 0): the peer cannot track it, which
+            # scores as lost on every frame rather than ending the whole benchmark
+            print(f"  {self.name}: init failed on {rect}: {str(exc).strip().splitlines()[-1]}")
+            self._tracker = None
 
     def update(self, frame: Frame, ego: Matrix | None) -> Box | None:
+        if self._tracker is None:
+            return None
         ok, rect = self._tracker.update(frame)
         if not ok:
             return None

@@ -57,3 +57,36 @@ def test_occlusion_windows_are_where_a_walker_is_hidden_and_comes_back() -> None
     assert pick_occlusions(gt, max_frames=100, count=1) == [(20, 5, 0, 59)]
     # a window too short to see him come back does not qualify
     assert pick_occlusions(gt, max_frames=25, count=5) == []
+
+
+def test_override_is_laid_over_the_tracker_table() -> None:
+    from pydantic import ValidationError
+
+    from bench.track_learned import ConfigTracker, make
+
+    rf = make("rf", 3, {"rf": {"colour_weight": 0.0}})
+    assert isinstance(rf, ConfigTracker)
+    assert (rf.config.kind, rf.config.seed, rf.config.rf.colour_weight) == ("rf", 3, 0.0)
+    assert rf.config.rf.coast  # the rest of the table as shipped
+    static = make("rf-static", 0, {"rf": {"coast": False}})
+    assert isinstance(static, ConfigTracker)
+    assert not static.config.rf.online and not static.config.rf.coast
+    assert make("color", 1).config.kind == "color"  # type: ignore[attr-defined]
+    with pytest.raises(ValidationError, match="colour_wieght"):
+        make("svm", 0, {"svm": {"colour_wieght": 1.0}})
+
+
+def test_a_peer_that_cannot_start_scores_every_frame_lost() -> None:
+    import cv2
+    import numpy as np
+
+    from bench.track import OpenCVTracker, Sequence, run_tracker
+
+    class CannotStart:  # as CSRT on a 1 x 1 box at the frame's edge
+        def init(self, frame: object, rect: object) -> None:
+            raise cv2.error("copyMakeBorder: !_src.empty()")
+
+    frames = [np.zeros((48, 64, 3), np.uint8) for _ in range(4)]
+    truth = dict.fromkeys(range(4), (0.0, 20.0, 1.0, 1.0))
+    run = run_tracker(OpenCVTracker("csrt", CannotStart), Sequence("edge", "x", frames, truth))
+    assert run.score.frames == 3 and run.score.lost_frames == 3 and run.score.auc == 0.0
