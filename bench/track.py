@@ -326,6 +326,10 @@ def opencv_tracker_factory(kind: str) -> Callable[[], Any]:
     )
 
 
+# OpenCV's peers are not started on a box narrower or lower than this (px).
+MIN_PEER_BOX = 4
+
+
 class OpenCVTracker:
     """An OpenCV tracker; `update` returning ok=False counts as null."""
 
@@ -338,15 +342,19 @@ class OpenCVTracker:
         x, y, w, h = box
         x0, y0 = round(x), round(y)
         rect = (x0, y0, max(1, round(x + w) - x0), max(1, round(y + h) - y0))
-        self._tracker = self._create()
+        self._tracker = None  # a peer that cannot start scores as lost on every frame
+        if min(rect[2:]) < MIN_PEER_BOX:
+            # synthetic-thermal:2's second track starts as a walker's first pixel (1 x 1 at
+            # x = 0): on it OpenCV 5.1's MIL never returns and CSRT raises
+            print(f"  {self.name}: not started on a box of {rect[2]} x {rect[3]} px")
+            return
+        tracker = self._create()
         try:
-            self._tracker.init(frame, rect)
+            tracker.init(frame, rect)
         except cv2.error as exc:
-            # e.g. CSRT on a walker's first pixel at the frame's edge (synthetic-thermal:2's
-            # second track starts as a 1 x 1 box at x = 0): the peer cannot track it, which
-            # scores as lost on every frame rather than ending the whole benchmark
             print(f"  {self.name}: init failed on {rect}: {str(exc).strip().splitlines()[-1]}")
-            self._tracker = None
+            return
+        self._tracker = tracker
 
     def update(self, frame: Frame, ego: Matrix | None) -> Box | None:
         if self._tracker is None:

@@ -82,11 +82,18 @@ def test_a_peer_that_cannot_start_scores_every_frame_lost() -> None:
 
     from bench.track import OpenCVTracker, Sequence, run_tracker
 
-    class CannotStart:  # as CSRT on a 1 x 1 box at the frame's edge
-        def init(self, frame: object, rect: object) -> None:
+    started: list[tuple[int, int, int, int]] = []
+
+    class CannotStart:  # as CSRT on a walker's first pixels at the frame's edge
+        def init(self, frame: object, rect: tuple[int, int, int, int]) -> None:
+            started.append(rect)
             raise cv2.error("copyMakeBorder: !_src.empty()")
 
     frames = [np.zeros((48, 64, 3), np.uint8) for _ in range(4)]
-    truth = dict.fromkeys(range(4), (0.0, 20.0, 1.0, 1.0))
-    run = run_tracker(OpenCVTracker("csrt", CannotStart), Sequence("edge", "x", frames, truth))
-    assert run.score.frames == 3 and run.score.lost_frames == 3 and run.score.auc == 0.0
+    for box in ((0.0, 20.0, 6.0, 8.0), (0.0, 20.0, 1.0, 1.0)):
+        truth = dict.fromkeys(range(4), box)
+        peer = OpenCVTracker("csrt", CannotStart)
+        run = run_tracker(peer, Sequence("edge", "x", frames, truth))
+        assert run.score.frames == 3 and run.score.lost_frames == 3 and run.score.auc == 0.0
+    # the 1 x 1 box is never handed to the peer (MIL never returns on one)
+    assert started == [(0, 20, 6, 8)]
