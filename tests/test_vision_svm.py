@@ -311,3 +311,40 @@ def test_cli_track_on_vtest(kind: str, tmp_path: Path) -> None:
     data = json.loads(out.read_text())
     assert data["params"]["tracker"] == kind
     assert len(data["boxes"]) == 21
+
+
+def test_boxes_on_what_hides_the_walker_do_not_become_positives() -> None:
+    # synthetic:9's walker 11 walks behind a hedge from frame 1042 to 1085 (scene frames);
+    # the SVM keeps calling the box there confident, and without the learning rules it
+    # learns the hedge as positives
+    from ptzd.sim.sources import open_wide_source
+
+    source = open_wide_source("synthetic:9")
+    gt = source.ground_truth
+    assert gt is not None
+    first, walker = 1023, 11
+    frames = [source.read(i) for i in range(first, first + 78)]
+    hidden = [gt.visibility[walker].get(first + i, 0.0) < 0.3 for i in range(78)]
+    assert sum(hidden) >= 30
+    rules = {
+        "both": {},
+        "motion only": {"learn_needs_colour": False},
+        "neither": {"learn_needs_colour": False, "learn_needs_motion": False},
+    }
+    learned: dict[str, list[int]] = {}
+    for name, section in rules.items():
+        learned[name] = []
+        for seed in range(2):
+            config = TrackerConfig.model_validate({"kind": "svm", "seed": seed, "svm": section})
+            tracker = SvmTracker(config)
+            tracker.init(frames[0], gt.tracks[walker][first])
+            count = 0
+            for i in range(1, len(frames)):
+                before = tracker.learned_positives
+                tracker.update(frames[i])
+                count += hidden[i] and tracker.learned_positives > before
+            learned[name].append(count)
+    assert learned["both"] == [0, 0], learned
+    assert min(learned["neither"]) >= 10, learned
+    # the motion rule alone keeps some out; the colour model the rest
+    assert all(m < n for m, n in zip(learned["motion only"], learned["neither"], strict=True))

@@ -550,6 +550,10 @@ class ColourVote:
         weighted: FloatArray = weights * np.exp(self._weight * (log - log.max()))
         return weighted
 
+    def agrees(self, frame: Frame, box: FloatArray, threshold: float) -> bool:
+        """The colour model's similarity at `box` is at least `threshold` (True when off)."""
+        return not self.active or self._likelihood.similarity(frame, box) >= threshold
+
     def adapt(self, frame: Frame, box: FloatArray) -> None:
         if self.active:
             self._likelihood.adapt(frame, box)

@@ -266,6 +266,12 @@ class RfConfig(StrictModel):
     # walker went behind, and then score it above U_min for good (docs/tracking.md).
     motion_floor: float = Field(default=0.2, ge=0.0, le=1.0)
     still_frames: int = Field(default=15, ge=0, le=10_000)
+    # Beyond the seed: a tracked box is not learned if nothing moved in it (the camera
+    # still): the target is hidden or standing, and the box may show what he went behind;
+    # nor, on colour frames, if the colour model (`tracker.color`) scores it under
+    # `occlusion.similarity_threshold`. False = the seed's condition alone.
+    learn_needs_motion: bool = True
+    learn_needs_colour: bool = True
     # Beyond the seed: on colour frames each particle's P is multiplied by the colour
     # tracker's likelihood (`tracker.color`) to this power; its model learns on learning
     # frames. 0 = off (the seed's grey-level forests alone). Off on grey frames.
@@ -351,6 +357,11 @@ class SvmConfig(StrictModel):
     # tracker's likelihood (`tracker.color`) to this power; its model learns from confident
     # boxes. 0 = off (the seed's SVM alone). Off on grey frames.
     colour_weight: float = Field(default=2.0, ge=0.0, le=10.0)
+    # Beyond the seed: a confident box joins the positives only if something moved in it
+    # (the camera still) and, on colour frames, the colour model scores it at
+    # `occlusion.similarity_threshold` (ptzd/vision/learning.py). False = the seed's rule.
+    learn_needs_motion: bool = True
+    learn_needs_colour: bool = True
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

@@ -20,7 +20,9 @@ memory (sec. 4.3) only when the learning condition of sec. 4.5 holds:
 Beyond the seed, motion evidence (ptzd/vision/stillness.py): the particles' P is weighted
 towards boxes in which something moved (`RfConfig.motion_floor`), and a box in which
 nothing moved for `RfConfig.still_frames` frames is a full occlusion: forests that learned
-the occluder a walker went behind otherwise keep scoring it above U_min for good.
+the occluder a walker went behind otherwise keep scoring it above U_min for good. And so
+that they learn it less, a box in which nothing moved this frame is not learned, nor, on
+colour frames, one the colour model calls occluded (ptzd/vision/learning.py).
 
 U_max = min(0.72, alpha / ln sigma^2), sigma^2 the intensity variance of the target box,
 U_min = U_max - 0.4 (eqs. 21-22). Prediction is the second-order autoregressive model of
@@ -47,6 +49,7 @@ from ptzd.vision.features import (
     to_grey,
 )
 from ptzd.vision.forest import ForestBank
+from ptzd.vision.learning import LearningGate
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import (
     VELOCITY_SMOOTHING,
@@ -56,7 +59,7 @@ from ptzd.vision.particle_filter import (
     weighted_resample,
     zoom_homography,
 )
-from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
+from ptzd.vision.stillness import MotionMap, StillCounter, camera_still, motion_weights
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0  # pixels: boxes never shrink below this
@@ -235,11 +238,17 @@ class RfTracker:
         self._initialised = False
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold)
-        # with both rules off (the seed's tracker) the map is never fed: no per-frame cost
-        self._uses_motion = rf.motion_floor < 1.0 or rf.still_frames > 0
+        # with the motion rules off (the seed's tracker) the map is never fed: no per-frame cost
+        self._uses_motion = rf.motion_floor < 1.0 or rf.still_frames > 0 or rf.learn_needs_motion
         self._camera_still = True  # no image motion handed in with the last frame
         self._still = StillCounter(rf.still_frames, still.min_moving_fraction)
         self._colour = ColourVote(config.color, config.gmm, rf.colour_weight)
+        self._gate = LearningGate(
+            rf.learn_needs_motion,
+            rf.learn_needs_colour,
+            still.min_moving_fraction,
+            config.occlusion.similarity_threshold,
+        )
         resample_share = rf.top_particles / rf.num_particles
         self._resampling = ResamplingConfig(top_rate=resample_share, method="systematic")
 
@@ -286,7 +295,7 @@ class RfTracker:
             self._motion.update(frame, homography)
         # while the camera turns, the image motion handed in is the commanded one, a little
         # off the real; the background's edges then "move" and would draw the particles
-        self._camera_still = homography is None or bool(np.allclose(homography, np.eye(3)))
+        self._camera_still = camera_still(homography)
         previous = self._particles.copy()
         self._predict(frame.shape)
         maps = self.likelihood.maps(frame, self._cover(self._particles))
@@ -301,7 +310,9 @@ class RfTracker:
         if self._coasting:
             jump = max(jump, 2.0 * self._search_sigma())
         branch = choose_branch(diff, jump, p_t, u_min, u_max)
-        if self._still.count_box(self._motion, estimate) and branch in (
+        moved = self._motion.moving_fraction(estimate[None]) if self._uses_motion else None
+        moved_share = None if moved is None else float(moved[0])
+        if self._still.count(moved_share) and branch in (
             Branch.LEARN,
             Branch.PARTIAL_OCCLUSION,
         ):
@@ -312,7 +323,13 @@ class RfTracker:
             self._move_to(estimate, learn_velocity=branch is Branch.LEARN)
             # sec. 4.3: the memory grows with every tracked frame until it is full
             growing = len(self.memory.positives) < self._rf_config.positives
-            if self._rf_config.online and (branch is Branch.LEARN or growing):
+            if (
+                self._rf_config.online
+                and (branch is Branch.LEARN or growing)
+                and self._gate.allows(
+                    frame, estimate, moved_share, self._camera_still, self._colour
+                )
+            ):
                 self._learn(frame, maps)
                 self._colour.adapt(frame, self._box)
             self._resample(probs, top)

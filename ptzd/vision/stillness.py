@@ -22,6 +22,11 @@ from ptzd.vision.likelihood import FloatArray, Frame
 _IDENTITY = np.eye(3)
 
 
+def camera_still(homography: FloatArray | None) -> bool:
+    """No image motion was handed in with a frame (none, or the identity)."""
+    return homography is None or bool(np.allclose(homography, _IDENTITY))
+
+
 class MotionMap:
     """The moving pixels of the last frame given to `update` (none before the second).
 

@@ -33,6 +33,7 @@ from sklearn.svm import SVC
 from ptzd.vision.color import ColourVote
 from ptzd.vision.config import LkMotion, SvmConfig, TrackerConfig
 from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
+from ptzd.vision.learning import LearningGate
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import (
     VELOCITY_SMOOTHING,
@@ -41,7 +42,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.rf import sample_negatives
-from ptzd.vision.stillness import MotionMap, StillCounter
+from ptzd.vision.stillness import MotionMap, StillCounter, camera_still
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0
@@ -235,12 +236,20 @@ class SvmTracker:
         self._motion = MotionMap(config.stillness.diff_threshold)
         self._colour = ColourVote(config.color, config.gmm, config.svm.colour_weight)
         self._still = StillCounter(config.svm.still_frames, config.stillness.min_moving_fraction)
+        self._uses_motion = config.svm.still_frames > 0 or config.svm.learn_needs_motion
+        self._gate = LearningGate(
+            config.svm.learn_needs_motion,
+            config.svm.learn_needs_colour,
+            config.stillness.min_moving_fraction,
+            config.occlusion.similarity_threshold,
+        )
         self._box: FloatArray = np.zeros(4)
         self._reference: FloatArray = np.ones(2)  # init (w, h), rescaled on zoom
         self._velocity: FloatArray = np.zeros(2)
         self._particles: FloatArray = np.zeros((config.svm.num_particles, 4))
         self.positives: deque[FloatArray] = deque(maxlen=config.svm.positives)
         self.new_positives = 0
+        self.learned_positives = 0  # positives added since init
         self.retrains = 0
         self.mode = Mode.LK
         self.lk_error = 0.0
@@ -271,6 +280,7 @@ class SvmTracker:
         self.positives = deque(pos, maxlen=cfg.positives)
         self._retrain(bgr)
         self.retrains = 0
+        self.learned_positives = 0
         self._colour.init(frame, self._box)
         self.lk.set_template(to_grey(frame), self._box)
         self.mode = Mode.LK
@@ -311,7 +321,7 @@ class SvmTracker:
         homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
         if homography is not None:
             self._apply(homography)
-        if cfg.still_frames:
+        if self._uses_motion:
             self._motion.update(frame, homography)
         bgr, grey = to_bgr(frame), to_grey(frame)
         if self.mode is Mode.LK:
@@ -378,11 +388,15 @@ class SvmTracker:
                 self.lk.set_template(grey, self._box)
             elif self.lk_error < cfg.lk_error:
                 self.lk.set_template(grey, self._box)  # template update on confident frames
-            self.positives.append(self._features(bgr, self._box[None])[0])
-            self._colour.adapt(bgr, self._box)
-            self.new_positives += 1
-            if self.new_positives >= cfg.retrain_after:
-                self._retrain(bgr)
+            moved = self._motion.moving_fraction(self._box[None]) if self._uses_motion else None
+            share = None if moved is None else float(moved[0])
+            if self._gate.allows(bgr, self._box, share, camera_still(homography), self._colour):
+                self.positives.append(self._features(bgr, self._box[None])[0])
+                self._colour.adapt(bgr, self._box)
+                self.new_positives += 1
+                self.learned_positives += 1
+                if self.new_positives >= cfg.retrain_after:
+                    self._retrain(bgr)
         return self._result()
 
     def _scan(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
