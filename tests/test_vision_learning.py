@@ -8,22 +8,28 @@ import numpy as np
 from ptzd.vision.color import ColourVote
 from ptzd.vision.config import TrackerConfig
 from ptzd.vision.learning import LearningGate
+from ptzd.vision.likelihood import FloatArray, Frame
+from ptzd.vision.tracking import centre_box
 from tests.vision_helpers import Scene
 
 
-def _vote(frame: np.ndarray, box: np.ndarray) -> ColourVote:
+def _vote(frame: Frame, box: FloatArray) -> ColourVote:
     config = TrackerConfig()
     vote = ColourVote(config.color, config.gmm, 1.0)
     vote.init(frame, box)
     return vote
 
 
-def test_a_box_in_which_nothing_moved_is_not_learned_while_the_camera_is_still() -> None:
+def _walker() -> tuple[Frame, FloatArray, ColourVote]:
+    """The scene's first frame, the walker's box (centre form) and a colour vote on him."""
     scene = Scene()
     frame = scene.frame(0)
-    x, y, w, h = scene.truth(0)
-    box = np.array([x + w / 2, y + h / 2, w, h])
-    vote = _vote(frame, box)
+    box = centre_box(scene.truth(0))
+    return frame, box, _vote(frame, box)
+
+
+def test_a_box_in_which_nothing_moved_is_not_learned_while_the_camera_is_still() -> None:
+    frame, box, vote = _walker()
     gate = LearningGate(True, False, 0.02, 0.6)
     assert gate.allows(frame, box, 0.3, True, vote)
     assert not gate.allows(frame, box, 0.01, True, vote)
@@ -33,11 +39,8 @@ def test_a_box_in_which_nothing_moved_is_not_learned_while_the_camera_is_still()
 
 
 def test_a_box_the_colour_model_calls_occluded_is_not_learned() -> None:
-    scene = Scene()
-    frame = scene.frame(0)
-    x, y, w, h = scene.truth(0)
-    box = np.array([x + w / 2, y + h / 2, w, h])
-    vote = _vote(frame, box)
+    frame, box, vote = _walker()
+    x, y, w, h = box[0] - box[2] / 2, box[1] - box[3] / 2, box[2], box[3]
     gate = LearningGate(False, True, 0.02, 0.6)
     assert gate.allows(frame, box, None, True, vote)
     hidden = frame.copy()

@@ -29,8 +29,8 @@ from ptzd.vision.rf import (
     learning_bounds,
     sample_negatives,
 )
-from ptzd.vision.tracking import TrackState, make_tracker
-from tests.vision_helpers import Scene, iou
+from ptzd.vision.tracking import Box, TrackState, centre_box, make_tracker
+from tests.vision_helpers import Scene, iou, synthetic_window
 
 PATCH = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
 
@@ -275,10 +275,9 @@ def _rf(seed: int, **rf: object) -> RfTracker:
     return tracker
 
 
-def _forests_p(tracker: RfTracker, frame: np.ndarray, box: tuple[float, ...]) -> float:
+def _forests_p(tracker: RfTracker, frame: np.ndarray, box: Box) -> float:
     """The forests' P at `box` (top-left form), on fresh feature maps."""
-    x, y, w, h = box
-    centre = np.array([[x + w / 2, y + h / 2, w, h]])
+    centre = centre_box(box)[None]
     grey, cfg = to_grey(frame), tracker.likelihood.config
     maps = FeatureMaps(grey, (0, 0, grey.shape[1], grey.shape[0]), cfg.lid_bins, cfg.ocs_threshold)
     return float(tracker.likelihood.probability(tracker.likelihood.features(maps, centre))[0])
@@ -289,13 +288,8 @@ def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
     # 340) and is out again 30 frames later; the memory learns every tracked frame until it
     # holds 15 positives, so without the motion rule the forests learn the column while the
     # box waits on it, and score the walker low once he is back
-    from ptzd.sim.sources import open_wide_source
-
-    source = open_wide_source("synthetic:3")
-    gt = source.ground_truth
-    assert gt is not None
     first, walker = 340, 13
-    frames = [source.read(i) for i in range(first, first + 60)]
+    gt, frames = synthetic_window(3, first, 60)
     back = [i for i in range(40, 60) if gt.visibility[walker][first + i] >= 0.9]
     assert len(back) >= 15
     mean_p: dict[bool, list[float]] = {}

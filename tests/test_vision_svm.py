@@ -23,7 +23,7 @@ from ptzd.vision.svm import (
     platt_probability,
 )
 from ptzd.vision.tracking import TrackState
-from tests.vision_helpers import Scene, draw_person, iou, twin_outcomes
+from tests.vision_helpers import Scene, draw_person, iou, synthetic_window, twin_outcomes
 
 REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
 
@@ -317,13 +317,8 @@ def test_boxes_on_what_hides_the_walker_do_not_become_positives() -> None:
     # synthetic:9's walker 11 walks behind a hedge from frame 1042 to 1085 (scene frames);
     # the SVM keeps calling the box there confident, and without the learning rules it
     # learns the hedge as positives
-    from ptzd.sim.sources import open_wide_source
-
-    source = open_wide_source("synthetic:9")
-    gt = source.ground_truth
-    assert gt is not None
     first, walker = 1023, 11
-    frames = [source.read(i) for i in range(first, first + 78)]
+    gt, frames = synthetic_window(9, first, 78)
     hidden = [gt.visibility[walker].get(first + i, 0.0) < 0.3 for i in range(78)]
     assert sum(hidden) >= 30
     rules = {

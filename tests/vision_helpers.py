@@ -106,3 +106,12 @@ def twin_outcomes(
                 result = tracker.update(image)
             outcome[name].append((result.state, iou(result.box, end), iou(result.box, scene.start)))
     return outcome
+
+
+def synthetic_window(seed: int, first: int, count: int) -> tuple[Any, list[Frame]]:
+    """`synthetic:SEED`'s ground truth and its scene frames first..first+count-1."""
+    from ptzd.sim.sources import open_wide_source
+
+    source = open_wide_source(f"synthetic:{seed}")
+    assert source.ground_truth is not None
+    return source.ground_truth, [source.read(i) for i in range(first, first + count)]
