@@ -316,15 +316,15 @@ def test_cli_track_on_vtest(kind: str, tmp_path: Path) -> None:
 def test_boxes_on_what_hides_the_walker_do_not_become_positives() -> None:
     # synthetic:9's walker 11 walks behind a hedge from frame 1042 to 1085 (scene frames);
     # the SVM keeps calling the box there confident, and without the learning rules it
-    # learns the hedge as positives
+    # learns the hedge as positives (the colour rule is off by default for svm)
     first, walker = 1023, 11
     gt, frames = synthetic_window(9, first, 78)
     hidden = [gt.visibility[walker].get(first + i, 0.0) < 0.3 for i in range(78)]
     assert sum(hidden) >= 30
     rules = {
-        "both": {},
-        "motion only": {"learn_needs_colour": False},
-        "neither": {"learn_needs_colour": False, "learn_needs_motion": False},
+        "both": {"learn_needs_colour": True},
+        "motion only": {},
+        "neither": {"learn_needs_motion": False},
     }
     learned: dict[str, list[int]] = {}
     for name, section in rules.items():

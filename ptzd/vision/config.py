@@ -358,10 +358,12 @@ class SvmConfig(StrictModel):
     # boxes. 0 = off (the seed's SVM alone). Off on grey frames.
     colour_weight: float = Field(default=2.0, ge=0.0, le=10.0)
     # Beyond the seed: a confident box joins the positives only if something moved in it
-    # (the camera still) and, on colour frames, the colour model scores it at
-    # `occlusion.similarity_threshold` (ptzd/vision/learning.py). False = the seed's rule.
+    # (the camera still; ptzd/vision/learning.py). False = the seed's rule. The colour rule
+    # rf has (the colour model scores the box at `occlusion.similarity_threshold`) is off:
+    # in the closed loop it refused 28 confident boxes in a row on vtest#1 (tracker seed
+    # 2), which then failed (centred 0.32 against 1.00 without it; docs/tracking.md).
     learn_needs_motion: bool = True
-    learn_needs_colour: bool = True
+    learn_needs_colour: bool = False
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:
