@@ -29,7 +29,7 @@ from ptzd.vision.rf import (
     learning_bounds,
     sample_negatives,
 )
-from ptzd.vision.tracking import Box, TrackState, centre_box, make_tracker
+from ptzd.vision.tracking import TrackState, make_tracker
 from tests.vision_helpers import Scene, iou, synthetic_window
 
 PATCH = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
@@ -275,14 +275,6 @@ def _rf(seed: int, **rf: object) -> RfTracker:
     return tracker
 
 
-def _forests_p(tracker: RfTracker, frame: np.ndarray, box: Box) -> float:
-    """The forests' P at `box` (top-left form), on fresh feature maps."""
-    centre = centre_box(box)[None]
-    grey, cfg = to_grey(frame), tracker.likelihood.config
-    maps = FeatureMaps(grey, (0, 0, grey.shape[1], grey.shape[0]), cfg.lid_bins, cfg.ocs_threshold)
-    return float(tracker.likelihood.probability(tracker.likelihood.features(maps, centre))[0])
-
-
 def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
     # synthetic:3's walker 13 goes behind a column 5 frames after a fair start (scene frame
     # 340) and is out again 30 frames later; the memory learns every tracked frame until it
@@ -302,7 +294,7 @@ def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
             for i in range(1, 60):
                 tracker.update(frames[i])
                 if i in back:
-                    scores.append(_forests_p(tracker, frames[i], gt.tracks[walker][first + i]))
+                    scores.append(tracker.probability_at(frames[i], gt.tracks[walker][first + i]))
             mean_p[rule].append(float(np.mean(scores)))
     assert min(mean_p[True]) > 0.45, mean_p
     assert max(mean_p[False]) < 0.4, mean_p

@@ -356,12 +356,16 @@ class RfTracker:
 
     def resembles(self, frame: Frame, box: Box) -> bool:
         """The forests call it positive (P > 0.5), as they call the target's own boxes."""
+        return self.probability_at(frame, box) > 0.5
+
+    def probability_at(self, frame: Frame, box: Box) -> float:
+        """The forests' P (seed eq. 17) of `box` (top-left form) in `frame`."""
         centre = centre_box(box)[None]
         # fresh maps: the frame's cached ones cover the particles, not necessarily this box
         grey, cfg = to_grey(frame), self._rf_config
         region = region_of(self._cover(centre), grey.shape)
         maps = FeatureMaps(grey, region, cfg.lid_bins, cfg.ocs_threshold)
-        return float(self.likelihood.probability(self.likelihood.features(maps, centre))[0]) > 0.5
+        return float(self.likelihood.probability(self.likelihood.features(maps, centre))[0])
 
     def rescale(self, factor: float, center: tuple[float, float]) -> None:
         zoom = zoom_homography(factor, center)
