@@ -11,7 +11,7 @@ machine is shared, so latency numbers are noisy.
 
     .venv/bin/python -m bench.closed_loop [--seeds 0 1 2] [--duration 30] [--tracker-seeds 0]
         [--box-scale 1.3] [--box-width 1.3] [--thermal-seeds 0 1 2] [--walkers-of 0]
-        [--jobs 2] [--no-vtest]
+        [--jobs 2] [--no-vtest] [--against BASE.json]
 
 `--walkers-of SEED` adds every walker of synthetic:SEED seen for at least 4 s, each
 followed from the frame in which he is first well in view (`ptzd sim --target ID`): the
@@ -27,6 +27,9 @@ The outcome of a case is close to binary (the tracker stays on the target throug
 crossing, or it does not) and which way it goes can hang on the particle filter's random
 draws: `--tracker-seeds 0 1 2` runs every case once per tracker seed and the summary lines
 give the mean over all runs and how many runs met the target, per class of case.
+`--against BASE.json` (an earlier run's `--out`) lists the runs whose scores moved and
+which of them turned across the target: a variant that turns as many runs each way is
+churn, not a gain.
 """
 
 from __future__ import annotations
@@ -166,11 +169,43 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             "runs": len(mine),
             "centred_mean": round(statistics.fmean(r["centred"] for r in mine), 4),
             "in_view_mean": round(statistics.fmean(r["in_view"] for r in mine), 4),
-            "met": sum(r["centred"] >= 0.95 and r["in_view"] >= 1.0 for r in mine),
+            "met": sum(meets_target(r) for r in mine),
             "uncentred_by_state": dict(
                 sum((Counter(r.get("uncentred_by_state", {})) for r in mine), Counter())
             ),
         }
+        sizes = [r["size_err_median"] for r in mine if r.get("size_err_median") is not None]
+        if sizes:
+            # the runs' own medians, so one run's long miss does not weigh for the rest
+            out[kind]["size_err_median"] = round(statistics.median(sizes), 4)
+    return out
+
+
+def meets_target(row: dict[str, Any]) -> bool:
+    """Whether a run met the centring targets: centred >= 95 % of frames, in view in all."""
+    return bool(row["centred"] >= 0.95 and row["in_view"] >= 1.0)
+
+
+def changed_runs(
+    base: list[dict[str, Any]], rows: list[dict[str, Any]], tolerance: float = 0.004
+) -> list[dict[str, Any]]:
+    """The runs (case and tracker seed in both) whose centred or in-view fraction moved by
+    more than `tolerance` from `base`'s, each with both scores and `turn`: "met" (now meets
+    the target), "missed" (no longer does) or "" (same side of it)."""
+    before = {(r["case"], r["tracker_seed"]): r for r in base}
+    out = []
+    for row in rows:
+        old = before.get((row["case"], row["tracker_seed"]))
+        if old is None:
+            continue
+        moved = max(abs(row[k] - old[k]) for k in ("centred", "in_view"))
+        if moved <= tolerance:
+            continue
+        was, now = meets_target(old), meets_target(row)
+        out.append({"case": row["case"], "tracker_seed": row["tracker_seed"],
+                    "centred": [old["centred"], row["centred"]],
+                    "in_view": [old["in_view"], row["in_view"]],
+                    "turn": "" if was == now else ("met" if now else "missed")})  # fmt: skip
     return out
 
 
@@ -244,8 +279,22 @@ def main() -> None:
         help="runs side by side in this many processes (scores are the same; latencies are "
         "then measured on a busier machine)",
     )
+    parser.add_argument(
+        "--against",
+        type=Path,
+        metavar="BASE.json",
+        help="also list the runs whose scores differ from this earlier --out's (same case "
+        "and tracker seed): with outcomes this close to binary, which runs turned, not "
+        "only how many met the target",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "closed_loop.json")
     args = parser.parse_args()
+    base_rows = None
+    if args.against is not None:
+        try:
+            base_rows = json.loads(args.against.read_text())["rows"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            parser.error(f"--against {args.against}: not a closed_loop result ({exc})")
     if not 0.2 <= args.box_scale <= 5.0:
         parser.error(f"--box-scale must be in [0.2, 5], got {args.box_scale}")
     if not 0.2 <= args.box_width <= 5.0:
@@ -289,13 +338,28 @@ def main() -> None:
         print(
             f"{kind:<10} runs {s['runs']:>3}  mean centred {s['centred_mean']:.3f}  in view "
             f"{s['in_view_mean']:.3f}  target met (centred >= 0.95, in view 1.0) "
-            f"{s['met']}/{s['runs']}; {MISSES_HEADER} {misses(s['uncentred_by_state'])}"
+            f"{s['met']}/{s['runs']}; size err {s.get('size_err_median', 0):.3f}; "
+            f"{MISSES_HEADER} {misses(s['uncentred_by_state'])}"
         )
+    changed = None
+    if base_rows is not None:
+        changed = changed_runs(base_rows, rows)
+        print(f"against {args.against}: {len(changed)} runs changed")
+        for c in changed:
+            print(
+                f"  {c['case']:<14}{c['tracker_seed']:>4}  centred {c['centred'][0]:.3f} -> "
+                f"{c['centred'][1]:.3f}  in view {c['in_view'][0]:.3f} -> {c['in_view'][1]:.3f}"
+                f"  {('now ' + c['turn']) if c['turn'] else ''}"
+            )
+        turned = Counter(c["turn"] for c in changed)
+        print(f"  now meeting the target: {turned['met']}; no longer: {turned['missed']}")
     out = args.out
     out.parent.mkdir(parents=True, exist_ok=True)
     doc = {"duration_s": args.duration, "override": args.override,
            "box_scale": args.box_scale, "box_width": args.box_width,
            "summary": summary, "rows": rows}  # fmt: skip
+    if changed is not None:
+        doc["against"] = {"base": str(args.against), "changed": changed}
     out.write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {out}")
 

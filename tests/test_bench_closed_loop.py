@@ -1,4 +1,4 @@
-"""bench/closed_loop.py's looser-annotation option: boxes scaled about their centres."""
+"""bench/closed_loop.py: scaled annotation boxes, cases, summaries and run comparisons."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from bench.closed_loop import cases, scale_boxes, summarise
+from bench.closed_loop import cases, changed_runs, scale_boxes, summarise
 
 
 def test_scale_boxes_keeps_centres_and_clips_to_the_frame() -> None:
@@ -122,15 +122,70 @@ def test_runs_side_by_side_score_as_one_after_another(tmp_path: Path) -> None:
         out = tmp_path / f"jobs{jobs}.json"
         command = [sys.executable, "-m", "bench.closed_loop", "--seeds", "3", "4"]
         command += ["--duration", "2", "--no-vtest", "--jobs", str(jobs), "--out", str(out)]
-        subprocess.run(
+        if jobs == 2:
+            command += ["--against", str(tmp_path / "jobs1.json")]
+        done = subprocess.run(
             command,
             cwd=root,
             check=True,
             capture_output=True,
+            text=True,
             timeout=110,
         )
         docs.append(json.loads(out.read_text()))
+    assert "0 runs changed" in done.stdout
+    assert docs[1]["against"] == {"base": str(tmp_path / "jobs1.json"), "changed": []}
     scores = [[(r["case"], r["centred"], r["in_view"], r["frames"]) for r in d["rows"]]
               for d in docs]  # fmt: skip
     assert [case for case, *_ in scores[0]] == ["synthetic:3", "synthetic:4"]
     assert scores[0] == scores[1]
+
+
+def _run(case: str, seed: int, centred: float, in_view: float = 1.0) -> dict[str, Any]:
+    return {"case": case, "tracker_seed": seed, "centred": centred, "in_view": in_view}
+
+
+def test_changed_runs_are_those_that_moved_and_say_which_way_they_turned() -> None:
+    base = [_run("synthetic:1", 0, 1.0), _run("synthetic:1", 1, 0.96),
+            _run("synthetic:5", 0, 0.84), _run("synthetic:8", 0, 0.97),
+            _run("synthetic:9", 0, 0.99)]  # fmt: skip
+    rows = [_run("synthetic:1", 0, 0.998),  # within the tolerance: not listed
+            _run("synthetic:1", 1, 0.98),  # moved, met both times
+            _run("synthetic:5", 0, 1.0),  # now meets the target
+            _run("synthetic:8", 0, 0.97, in_view=0.99),  # left the view: no longer meets it
+            _run("synthetic:9", 1, 0.5)]  # fmt: skip  # (not in base: another tracker seed)
+    changed = changed_runs(base, rows)
+    assert [(c["case"], c["tracker_seed"], c["turn"]) for c in changed] == [
+        ("synthetic:1", 1, ""),
+        ("synthetic:5", 0, "met"),
+        ("synthetic:8", 0, "missed"),
+    ]
+    assert changed[1]["centred"] == [0.84, 1.0] and changed[2]["in_view"] == [1.0, 0.99]
+    assert changed_runs(base, base) == []
+
+
+def test_the_summary_gives_the_median_of_the_runs_size_errors() -> None:
+    rows = [{**_run("synthetic:1", 0, 1.0), "size_err_median": 0.1},
+            {**_run("synthetic:2", 0, 1.0), "size_err_median": 0.5},
+            {**_run("synthetic:3", 0, 1.0), "size_err_median": 0.2},
+            {**_run("synthetic:4", 0, 1.0), "size_err_median": None}]  # fmt: skip
+    assert summarise(rows)["synthetic"]["size_err_median"] == 0.2  # None: nothing measured
+
+
+def test_a_bad_against_file_is_refused_before_anything_runs(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"summary": {}}')
+    for path in (bad, tmp_path / "missing.json"):
+        done = subprocess.run(
+            [sys.executable, "-m", "bench.closed_loop", "--against", str(path)],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2
+        assert f"--against {path}: not a closed_loop result" in done.stderr
