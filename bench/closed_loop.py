@@ -186,6 +186,10 @@ def meets_target(row: dict[str, Any]) -> bool:
     return bool(row["centred"] >= 0.95 and row["in_view"] >= 1.0)
 
 
+# What changed_runs() reads of a row: which run it is, and its scores.
+RUN_KEYS = frozenset({"case", "tracker_seed", "centred", "in_view"})
+
+
 def changed_runs(
     base: list[dict[str, Any]], rows: list[dict[str, Any]], tolerance: float = 0.004
 ) -> list[dict[str, Any]]:
@@ -291,9 +295,12 @@ def main() -> None:
     args = parser.parse_args()
     base_rows = None
     if args.against is not None:
+        # read before the runs: a bad base found after them would lose their results
         try:
             base_rows = json.loads(args.against.read_text())["rows"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            if not all(row.keys() >= RUN_KEYS for row in base_rows):
+                raise ValueError(f"a row lacks one of {sorted(RUN_KEYS)}")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             parser.error(f"--against {args.against}: not a closed_loop result ({exc})")
     if not 0.2 <= args.box_scale <= 5.0:
         parser.error(f"--box-scale must be in [0.2, 5], got {args.box_scale}")
@@ -335,10 +342,11 @@ def main() -> None:
         )
     summary = summarise(rows)
     for kind, s in summary.items():
+        size = f"{s['size_err_median']:.3f}" if "size_err_median" in s else "-"
         print(
             f"{kind:<10} runs {s['runs']:>3}  mean centred {s['centred_mean']:.3f}  in view "
             f"{s['in_view_mean']:.3f}  target met (centred >= 0.95, in view 1.0) "
-            f"{s['met']}/{s['runs']}; size err {s.get('size_err_median', 0):.3f}; "
+            f"{s['met']}/{s['runs']}; size err {size}; "
             f"{MISSES_HEADER} {misses(s['uncentred_by_state'])}"
         )
     changed = None

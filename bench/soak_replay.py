@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.closed_loop import ROOT, run_case
+from bench.closed_loop import ROOT, meets_target, run_case
 from ptzd.closed_loop import in_central_cell
 from ptzd.config import merge_tables
 from ptzd.sim.groundtruth import GroundTruth, save_ground_truth
@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         "runs": len(rows),
         "centred_mean": round(statistics.fmean(r["centred"] for r in rows), 4),
         "in_view_mean": round(statistics.fmean(r["in_view"] for r in rows), 4),
-        "met": sum(r["centred"] >= 0.95 and r["in_view"] >= 1.0 for r in rows),
+        "met": sum(meets_target(r) for r in rows),
     }
     soaked = [r["soak_centred"] for r in rows if r["soak_centred"] is not None]
     if soaked:

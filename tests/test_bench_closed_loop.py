@@ -179,7 +179,9 @@ def test_a_bad_against_file_is_refused_before_anything_runs(tmp_path: Path) -> N
     root = Path(__file__).resolve().parents[1]
     bad = tmp_path / "bad.json"
     bad.write_text('{"summary": {}}')
-    for path in (bad, tmp_path / "missing.json"):
+    seedless = tmp_path / "seedless.json"  # a row that cannot be matched to a run
+    seedless.write_text('{"rows": [{"case": "synthetic:1", "centred": 1.0, "in_view": 1.0}]}')
+    for path in (bad, seedless, tmp_path / "missing.json"):
         done = subprocess.run(
             [sys.executable, "-m", "bench.closed_loop", "--against", str(path)],
             cwd=root,
