@@ -81,6 +81,26 @@ class Sequence:
     note: str = ""
 
 
+def scaled(seq: Sequence, factor: float) -> Sequence:
+    """`seq` as a camera of `factor` times the resolution would see it: frames resized
+    (area-averaged when shrinking), truth boxes and ego-motion homographies scaled alike."""
+    if factor <= 0:
+        raise ValueError(f"scale factor must be positive, got {factor}")
+    if factor == 1.0:
+        return seq
+    interpolation = cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR
+    frames: list[Frame] = [
+        np.asarray(cv2.resize(f, None, fx=factor, fy=factor, interpolation=interpolation), np.uint8)
+        for f in seq.frames
+    ]
+    truth = {i: (b[0] * factor, b[1] * factor, b[2] * factor, b[3] * factor)
+             for i, b in seq.truth.items()}  # fmt: skip
+    s = np.diag([factor, factor, 1.0])
+    ego = {i: s @ h @ np.linalg.inv(s) for i, h in seq.ego.items()}
+    note = f"{seq.note}, x{factor:g}" if seq.note else f"x{factor:g}"
+    return Sequence(seq.name, seq.cls, frames, truth, ego, note)
+
+
 def vtest_sequences(max_frames: int | None, only: set[str] | None) -> Iterator[Sequence]:
     if not VTEST.is_file():
         print(f"vtest: skipped, {VTEST} missing (run ./scripts/fetch-vtest.sh)", file=sys.stderr)

@@ -97,3 +97,28 @@ def test_a_peer_that_cannot_start_scores_every_frame_lost() -> None:
         assert run.score.frames == 3 and run.score.lost_frames == 3 and run.score.auc == 0.0
     # the 1 x 1 box is never handed to the peer (MIL never returns on one)
     assert started == [(0, 20, 6, 8)]
+
+
+def test_scaled_sequence_is_what_a_camera_of_that_resolution_sees() -> None:
+    import numpy as np
+
+    from bench.track import Sequence, scaled
+
+    frame = np.zeros((48, 64, 3), np.uint8)
+    frame[20:36, 10:18] = 255  # a person at (10, 20, 8, 16)
+    shift = np.array([[1.0, 0.0, 3.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    seq = Sequence("s", "c", [frame, frame], {0: (10, 20, 8, 16)}, {1: shift}, "frames 0..1")
+    big = scaled(seq, 2.0)
+    assert big.frames[0].shape == (96, 128, 3) and big.frames[0].dtype == np.uint8
+    ys, xs = np.nonzero(big.frames[0][:, :, 0] > 127)
+    assert (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1) == (20, 40, 36, 72)
+    assert big.truth[0] == pytest.approx((20, 40, 16, 32))
+    # the camera's motion in pixels doubles too: 3 px -> 6 px
+    np.testing.assert_allclose(big.ego[1] @ [50.0, 7.0, 1.0], [56.0, 7.0, 1.0])
+    assert big.note == "frames 0..1, x2"
+    small = scaled(seq, 0.5)
+    assert small.frames[1].shape == (24, 32, 3)
+    assert small.truth[0] == pytest.approx((5, 10, 4, 8))
+    assert scaled(seq, 1.0) is seq
+    with pytest.raises(ValueError, match="positive"):
+        scaled(seq, 0.0)
