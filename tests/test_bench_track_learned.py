@@ -122,3 +122,15 @@ def test_scaled_sequence_is_what_a_camera_of_that_resolution_sees() -> None:
     assert scaled(seq, 1.0) is seq
     with pytest.raises(ValueError, match="positive"):
         scaled(seq, 0.0)
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "9", "nan"])
+def test_a_frame_scale_out_of_range_is_refused_before_anything_runs(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from bench.track_learned import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--frame-scale", value, "--classes", "vtest", "--no-speed"])
+    assert exc.value.code == 2
+    assert "--frame-scale must be within 0.05..8" in capsys.readouterr().err
