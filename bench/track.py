@@ -101,6 +101,16 @@ def scaled(seq: Sequence, factor: float) -> Sequence:
     return Sequence(seq.name, seq.cls, frames, truth, ego, note)
 
 
+def greyed(seq: Sequence) -> Sequence:
+    """`seq` as a monochrome camera (a day/night camera at night) sees it: single-channel."""
+    frames: list[Frame] = [
+        f if f.ndim == 2 else np.asarray(cv2.cvtColor(f, cv2.COLOR_BGR2GRAY), np.uint8)
+        for f in seq.frames
+    ]
+    note = f"{seq.note}, grey" if seq.note else "grey"
+    return Sequence(seq.name, seq.cls, frames, seq.truth, seq.ego, note)
+
+
 def vtest_sequences(max_frames: int | None, only: set[str] | None) -> Iterator[Sequence]:
     if not VTEST.is_file():
         print(f"vtest: skipped, {VTEST} missing (run ./scripts/fetch-vtest.sh)", file=sys.stderr)

@@ -47,6 +47,7 @@ from bench.track import (  # noqa: E402
     OpenCVTracker,
     Sequence,
     fair_start,
+    greyed,
     opencv_tracker_factory,
     print_table,
     run_tracker,
@@ -264,6 +265,12 @@ def main(argv: list[str] | None = None) -> int:
         help="every sequence as a camera of this many times the resolution sees it (frames "
         "resized, truth scaled); hidden checks may come from other cameras",
     )
+    parser.add_argument(
+        "--grey",
+        action="store_true",
+        help="every sequence single-channel, as a monochrome camera (a day/night camera at "
+        "night) delivers it",
+    )
     parser.add_argument("--quick", action="store_true", help="seed 1, one target, 100 frames")
     parser.add_argument("--out", type=Path, default=RESULTS / "track_learned.json")
     args = parser.parse_args(argv)
@@ -304,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
             if 0 not in seq.truth:
                 continue
             seq = scaled(seq, args.frame_scale)
+            if args.grey:
+                seq = greyed(seq)
             entry: dict[str, Any] = {
                 "name": seq.name,
                 "class": seq.cls,
@@ -343,6 +352,7 @@ def main(argv: list[str] | None = None) -> int:
         "argv": sys.argv[1:] if argv is None else argv,
         "override": args.override,
         "frame_scale": args.frame_scale,
+        "grey": args.grey,
         "sequences": results,
         "classes": summary,
         "speed": fps,

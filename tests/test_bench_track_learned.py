@@ -134,3 +134,19 @@ def test_a_frame_scale_out_of_range_is_refused_before_anything_runs(
         main(["--frame-scale", value, "--classes", "vtest", "--no-speed"])
     assert exc.value.code == 2
     assert "--frame-scale must be within 0.05..8" in capsys.readouterr().err
+
+
+def test_greyed_sequence_is_single_channel_with_the_same_truth() -> None:
+    import numpy as np
+
+    from bench.track import Sequence, greyed
+
+    frame = np.zeros((48, 64, 3), np.uint8)
+    frame[20:36, 10:18] = (0, 0, 255)  # red in BGR
+    seq = Sequence("s", "c", [frame, frame[:, :, 0].copy()], {0: (10, 20, 8, 16)}, {}, "x2")
+    grey = greyed(seq)
+    assert [f.shape for f in grey.frames] == [(48, 64), (48, 64)]
+    assert grey.frames[0].dtype == np.uint8
+    assert grey.frames[0][25, 12] == 76  # ITU-R BT.601 luma of pure red: 0.299 * 255
+    assert grey.frames[1] is seq.frames[1]  # already single-channel
+    assert grey.truth == seq.truth and grey.note == "x2, grey"
