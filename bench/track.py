@@ -52,6 +52,7 @@ import numpy.typing as npt  # noqa: E402
 
 from ptzd.metrics import IOU_THRESHOLDS, Box, SequenceScore, score_sequence  # noqa: E402
 from ptzd.sim.groundtruth import load_ground_truth  # noqa: E402
+from ptzd.vision.features import to_grey  # noqa: E402
 
 Frame = npt.NDArray[np.uint8]
 Matrix = npt.NDArray[np.float64]
@@ -103,12 +104,8 @@ def scaled(seq: Sequence, factor: float) -> Sequence:
 
 def greyed(seq: Sequence) -> Sequence:
     """`seq` as a monochrome camera (a day/night camera at night) sees it: single-channel."""
-    frames: list[Frame] = [
-        f if f.ndim == 2 else np.asarray(cv2.cvtColor(f, cv2.COLOR_BGR2GRAY), np.uint8)
-        for f in seq.frames
-    ]
     note = f"{seq.note}, grey" if seq.note else "grey"
-    return Sequence(seq.name, seq.cls, frames, seq.truth, seq.ego, note)
+    return Sequence(seq.name, seq.cls, [to_grey(f) for f in seq.frames], seq.truth, seq.ego, note)
 
 
 def vtest_sequences(max_frames: int | None, only: set[str] | None) -> Iterator[Sequence]:
