@@ -52,7 +52,7 @@ import numpy.typing as npt  # noqa: E402
 
 from ptzd.metrics import IOU_THRESHOLDS, Box, SequenceScore, score_sequence  # noqa: E402
 from ptzd.sim.groundtruth import load_ground_truth  # noqa: E402
-from ptzd.vision.features import to_grey  # noqa: E402
+from ptzd.vision.features import to_bgr, to_grey  # noqa: E402
 
 Frame = npt.NDArray[np.uint8]
 Matrix = npt.NDArray[np.float64]
@@ -106,6 +106,17 @@ def greyed(seq: Sequence) -> Sequence:
     """`seq` as a monochrome camera (a day/night camera at night) sees it: single-channel."""
     note = f"{seq.note}, grey" if seq.note else "grey"
     return Sequence(seq.name, seq.cls, [to_grey(f) for f in seq.frames], seq.truth, seq.ego, note)
+
+
+def dusk(seq: Sequence, at: float) -> Sequence:
+    """`seq` with a day/night camera going to night mode `at` (a fraction of its length) of
+    the way through: from that frame on grey, in three equal channels as a decoder gives them."""
+    if not 0.0 <= at <= 1.0:
+        raise ValueError(f"dusk must be within 0..1 of the sequence, got {at}")
+    start = round(at * len(seq.frames))
+    frames = [f if i < start else to_bgr(to_grey(f)) for i, f in enumerate(seq.frames)]
+    note = f"{seq.note}, grey from {start}" if seq.note else f"grey from {start}"
+    return Sequence(seq.name, seq.cls, frames, seq.truth, seq.ego, note)
 
 
 def vtest_sequences(max_frames: int | None, only: set[str] | None) -> Iterator[Sequence]:

@@ -46,6 +46,7 @@ from bench.track import (  # noqa: E402
     Matrix,
     OpenCVTracker,
     Sequence,
+    dusk,
     fair_start,
     greyed,
     opencv_tracker_factory,
@@ -86,6 +87,7 @@ class ConfigTracker:
 
     def _input(self, frame: Frame) -> Frame:
         # the colour likelihood needs BGR; rf and svm take grey frames as they are
+        # auto runs on what it gets, single-channel included (it then picks its night tracker)
         return _bgr(frame) if self.config.kind == "color" else frame
 
     def update(self, frame: Frame, ego: Matrix | None) -> Box | None:
@@ -119,7 +121,7 @@ def make(name: str, seed: int, override: Mapping[str, Any] | None = None) -> Ben
     table: dict[str, Any] = {"kind": name, "seed": seed}
     if name == "rf-static":
         table = {"kind": "rf", "seed": seed, "rf": {"online": False}}
-    if name in ("color", "rf", "svm", "rf-static"):
+    if name in ("color", "rf", "svm", "auto", "rf-static"):
         config = TrackerConfig.model_validate(merge_tables(table, override or {}))
         return ConfigTracker(name, config)
     if name in PEERS:
@@ -271,11 +273,21 @@ def main(argv: list[str] | None = None) -> int:
         help="every sequence single-channel, as a monochrome camera (a day/night camera at "
         "night) delivers it",
     )
+    parser.add_argument(
+        "--dusk",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="a day/night camera going to night mode this fraction of the way through every "
+        "sequence: grey (three equal channels) from there on; the case `auto` is for",
+    )
     parser.add_argument("--quick", action="store_true", help="seed 1, one target, 100 frames")
     parser.add_argument("--out", type=Path, default=RESULTS / "track_learned.json")
     args = parser.parse_args(argv)
     if not 0.05 <= args.frame_scale <= 8:
         parser.error(f"--frame-scale must be within 0.05..8, got {args.frame_scale}")
+    if args.dusk is not None and not 0 <= args.dusk <= 1:
+        parser.error(f"--dusk must be within 0..1, got {args.dusk}")
     if args.quick:
         args.seeds, args.targets_per_seed, args.max_frames, args.repeats = "1", 1, 100, 1
     names = [t for t in args.trackers.split(",") if t]
@@ -313,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
             seq = scaled(seq, args.frame_scale)
             if args.grey:
                 seq = greyed(seq)
+            if args.dusk is not None:
+                seq = dusk(seq, args.dusk)
             entry: dict[str, Any] = {
                 "name": seq.name,
                 "class": seq.cls,
@@ -353,6 +367,7 @@ def main(argv: list[str] | None = None) -> int:
         "override": args.override,
         "frame_scale": args.frame_scale,
         "grey": args.grey,
+        "dusk": args.dusk,
         "sequences": results,
         "classes": summary,
         "speed": fps,

@@ -150,3 +150,34 @@ def test_greyed_sequence_is_single_channel_with_the_same_truth() -> None:
     assert grey.frames[0][25, 12] == 76  # ITU-R BT.601 luma of pure red: 0.299 * 255
     assert grey.frames[1] is seq.frames[1]  # already single-channel
     assert grey.truth == seq.truth and grey.note == "x2, grey"
+
+
+def test_dusk_turns_the_frames_grey_from_its_point_on() -> None:
+    import numpy as np
+
+    from bench.track import Sequence, dusk
+
+    red = np.zeros((8, 8, 3), np.uint8)
+    red[..., 2] = 255
+    seq = Sequence("s", "c", [red] * 4, {0: (1, 1, 4, 4)}, {}, "")
+    evening = dusk(seq, 0.5)
+    assert [f.shape for f in evening.frames] == [(8, 8, 3)] * 4
+    assert evening.frames[1] is red
+    # from frame 2 on: BT.601 luma of pure red (76) in all three channels
+    assert all(np.all(f == 76) for f in evening.frames[2:])
+    assert evening.truth == seq.truth and evening.note == "grey from 2"
+    assert all(np.all(f == 76) for f in dusk(seq, 0.0).frames)
+    with pytest.raises(ValueError, match=r"within 0\.\.1"):
+        dusk(seq, 1.5)
+
+
+@pytest.mark.parametrize("value", ["-0.1", "1.5", "nan"])
+def test_a_dusk_out_of_range_is_refused_before_anything_runs(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from bench.track_learned import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--dusk", value, "--classes", "vtest", "--no-speed"])
+    assert exc.value.code == 2
+    assert "--dusk must be within 0..1" in capsys.readouterr().err

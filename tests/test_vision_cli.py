@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import pytest
 
+from ptzd.vision.features import to_bgr, to_grey
 from tests.vision_helpers import Scene, iou
 
 FRAMES = 30
@@ -58,6 +59,28 @@ def test_track_writes_every_frame_from_start_to_end(video, tmp_path: Path) -> No
     capture = cv2.VideoCapture(str(overlay))
     assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == 16
     capture.release()
+
+
+def test_auto_tracks_through_dusk_in_an_encoded_video(tmp_path: Path) -> None:
+    """A day/night camera's video going grey halfway (MJPEG-coded, so the grey frames carry
+    the codec's chroma rounding): `--tracker auto` hands over to rf and stays on him."""
+    scene = Scene(velocity=(2.0, 0.5))
+    path = tmp_path / "dusk.avi"
+    writer = cv2.VideoWriter(
+        str(path), cv2.VideoWriter.fourcc(*"MJPG"), 10.0, (scene.width, scene.height)
+    )
+    for t in range(FRAMES):
+        frame = scene.frame(t)
+        writer.write(to_bgr(to_grey(frame)) if t >= 15 else frame)
+    writer.release()
+    out = tmp_path / "out.json"
+    proc = _ptzd("track", str(path), "--init", _box(scene, 0), "--tracker", "auto",
+                 "--out", str(out))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "tracker_switched" in proc.stdout + proc.stderr
+    boxes = json.loads(out.read_text())["boxes"]
+    for t in range(1, FRAMES):
+        assert iou(tuple(boxes[str(t)]), scene.truth(t)) > 0.5, t
 
 
 def test_track_runs_to_the_last_frame_without_end(video, tmp_path: Path) -> None:

@@ -28,6 +28,7 @@ from ptzd.sim.camera_model import CameraModel, Image, Pose, PreparedWide
 from ptzd.sim.config import SimConfig
 from ptzd.sim.dome import Dome
 from ptzd.sim.endpoint import SerialLink
+from ptzd.vision.features import to_bgr, to_grey
 
 if TYPE_CHECKING:
     from ptzd.sim.sources import WideSource
@@ -166,6 +167,9 @@ class SimCamera:
         if self._prepared is None or self._prepared[0] != video_frame:
             self._prepared = (video_frame, self.model.prepare(self.source.read(video_frame)))
         image = self.model.render(self._prepared[1], pose)
+        night = self.config.night_after_s
+        if night is not None and t - self.epoch >= night and image.ndim == 3:  # thermal: grey
+            image = to_bgr(to_grey(image))
         frame = SimFrame(image, t, index, video_frame, pose)
         self.frames_rendered += 1
         if self.recorder is not None:

@@ -70,6 +70,10 @@ class SimConfig(StrictModel):
     # from the pose the soak's dome had (docs/reliability.md).
     start_pan: float | None = Field(default=None, ge=-360.0, le=360.0)
     start_tilt: float | None = Field(default=None, ge=-90.0, le=90.0)
+    # a day/night dome going to night mode (IR-cut filter out): from this many seconds
+    # after the start every view is grey, in three equal channels as a decoder gives it
+    # (the wide video's luma: no IR illuminator, no near-infrared reflectance). None: day
+    night_after_s: float | None = Field(default=None, ge=0.0, le=1e7)
 
     @model_validator(mode="after")
     def _check_ranges(self) -> SimConfig:

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
     from ptzd.vision.config import TrackerConfig
 
-TRACKERS = ("color", "rf", "svm")
+TRACKERS = ("color", "rf", "svm", "auto")
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -48,7 +48,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         "--tracker",
         choices=TRACKERS,
         default="color",
-        help="tracker: color (seed 002), rf (seed 000, grey/thermal), svm (seed 004)",
+        help=(
+            "tracker: color (seed 002), rf (seed 000, grey/thermal), svm (seed 004), auto"
+            " (color on colour frames, rf on grey ones: a day/night camera; [tracker.auto])"
+        ),
     )
     track.add_argument("--out", required=True, metavar="OUT.json", help="where to write boxes")
     track.add_argument("--overlay", metavar="OUT.mp4", help="also write a video with the boxes")

@@ -395,10 +395,47 @@ class StillnessConfig(StrictModel):
     lost_penalty: float = Field(default=3.0, ge=0.0, le=50.0)
 
 
+TrackerKind = Literal["color", "rf", "svm"]
+
+
+class AutoConfig(StrictModel):
+    """`kind = "auto"`: one tracker for colour frames, another for monochrome ones (ours).
+
+    A day/night camera drops its IR-cut filter at dusk and sends grey frames (still three
+    channels from the decoder, all alike); a thermal camera sends grey always. Colour
+    histograms carry nothing on grey frames, and a model learned in colour does not match
+    the same person in near-infrared. Each frame's colourfulness is the mean, over a sparse
+    grid, of the spread between a pixel's largest and smallest channel (0..255 levels; 0 on
+    a decoded grey frame, about 43 on vtest.avi). Under `mono_below` a frame is monochrome,
+    over `colour_above` colour, in between it is what the previous frame was; when it
+    changes the other tracker takes over on the target's box (ptzd/vision/auto.py).
+    """
+
+    day: TrackerKind = "color"
+    # rf: the best of the three on grey frames (docs/tracking.md "Day and night").
+    night: TrackerKind = "rf"
+    # Thresholds on the mean channel spread, levels. Grey frames come back from a video
+    # decoder at 2-3 (its YUV -> BGR rounding: MJPEG 2, MPEG-4 3); colour footage spreads
+    # 30-50 (vtest.avi 43, the synthetic scenes 31-48); vtest.avi with its saturation cut
+    # to a quarter and its brightness to a third, 4: taken as monochrome, which costs little
+    # (rf on colour frames is on par with color on vtest.avi).
+    mono_below: float = Field(default=6.0, gt=0.0, le=255.0)
+    colour_above: float = Field(default=10.0, gt=0.0, le=255.0)
+    # Every this many pixels along each axis are looked at (a 640x480 frame: 4800 of them).
+    sample_step: int = Field(default=8, ge=1, le=64)
+
+    @model_validator(mode="after")
+    def _band(self) -> AutoConfig:
+        if self.colour_above < self.mono_below:
+            raise ValueError("colour_above must be >= mono_below")
+        return self
+
+
 class TrackerConfig(StrictModel):
     """Which tracker runs and its particle-filter parameters."""
 
-    kind: Literal["color", "rf", "svm"] = "color"
+    # auto: [tracker.auto]'s day tracker on colour frames, its night tracker on grey ones
+    kind: Literal["color", "rf", "svm", "auto"] = "color"
     num_particles: int = Field(default=300, ge=10, le=5000)
     seed: int = Field(default=0, ge=0)
     # mean: seed eq. 15 weighted mean of all particles; top: weighted mean of the top_rate share.
@@ -412,3 +449,4 @@ class TrackerConfig(StrictModel):
     stillness: StillnessConfig = StillnessConfig()
     rf: RfConfig = RfConfig()
     svm: SvmConfig = SvmConfig()
+    auto: AutoConfig = AutoConfig()

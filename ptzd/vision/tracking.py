@@ -90,4 +90,8 @@ def make_tracker(config: TrackerConfig) -> Tracker:
         from ptzd.vision.svm import SvmTracker
 
         return SvmTracker(config)
+    if config.kind == "auto":
+        from ptzd.vision.auto import AutoTracker
+
+        return AutoTracker(config)
     raise ValueError(f"unknown tracker kind {config.kind!r}")  # pragma: no cover - Literal

@@ -1,0 +1,138 @@
+"""`kind = "auto"`: a day tracker on colour frames, a night tracker on monochrome ones.
+
+A day/night dome switches to monochrome at dusk (its IR-cut filter out) and back at dawn,
+often while it follows someone. A colour model learned by day does not match the same
+person in near-infrared grey, and colour histograms say little on grey frames, so the
+colour tracker loses the target on the switch and tracks worse at night. This tracker
+looks at every frame's colourfulness (`colourfulness`, thresholds with a dead band in
+`AutoConfig`) and runs `AutoConfig.day` or `AutoConfig.night`. When the frames change
+while the target is TRACKING, the other tracker starts on the target's box carried into
+the new frame (the camera's motion and the target's own); while it is occluded or lost
+the switch waits for the next `init` (a re-acquisition) or for the running tracker to
+find the target again, so that no model is learned on a box that may not hold the target.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ptzd.logs import get_logger
+from ptzd.vision.config import TrackerConfig, TrackerKind
+from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix, zoom_homography
+from ptzd.vision.tracking import Box, Tracker, TrackResult, TrackState, centre_box, make_tracker
+
+
+def colourfulness(frame: NDArray[np.uint8], step: int = 8) -> float:
+    """Mean spread between a pixel's largest and smallest channel over every `step`-th row
+    and column, in levels (0 for single-channel frames and for grey ones in three)."""
+    if frame.ndim == 2 or (frame.ndim == 3 and frame.shape[2] == 1):
+        return 0.0
+    if frame.ndim != 3 or frame.shape[2] != 3:
+        raise ValueError(f"frame must be HxW, HxWx1 or HxWx3, got shape {frame.shape}")
+    grid = frame[::step, ::step]
+    b, g, r = grid[..., 0], grid[..., 1], grid[..., 2]
+    # channel by channel: 7x faster than max/min along the last axis of a strided view;
+    # max >= min per pixel, so the uint8 difference cannot wrap
+    spread = np.maximum(np.maximum(b, g), r) - np.minimum(np.minimum(b, g), r)
+    return float(np.mean(spread))
+
+
+class AutoTracker:
+    """Runs `config.auto.day` on colour frames and `config.auto.night` on monochrome ones."""
+
+    def __init__(self, config: TrackerConfig) -> None:
+        if config.kind != "auto":
+            raise ValueError(f"AutoTracker needs kind = 'auto', got {config.kind!r}")
+        self._config = config
+        self._trackers: dict[TrackerKind, Tracker] = {}  # one of each, buffers kept
+        self._mono: bool | None = None  # what the last frame looked like
+        self._kind: TrackerKind | None = None
+        self._last: TrackResult | None = None
+        self._log = get_logger("vision")
+
+    @property
+    def kind(self) -> TrackerKind | None:
+        """The tracker running now (None before the first `init`)."""
+        return self._kind
+
+    def _tracker(self, kind: TrackerKind) -> Tracker:
+        if kind not in self._trackers:
+            self._trackers[kind] = make_tracker(self._config.model_copy(update={"kind": kind}))
+        return self._trackers[kind]
+
+    def _is_mono(self, frame: NDArray[np.uint8]) -> tuple[bool, float]:
+        auto = self._config.auto
+        level = colourfulness(frame, auto.sample_step)
+        if level < auto.mono_below:
+            return True, level
+        if level > auto.colour_above:
+            return False, level
+        if self._mono is None:  # in the band with nothing to go on: the nearer side
+            return level < (auto.mono_below + auto.colour_above) / 2, level
+        return self._mono, level
+
+    def _kind_for(self, mono: bool) -> TrackerKind:
+        return self._config.auto.night if mono else self._config.auto.day
+
+    def init(self, frame: NDArray[np.uint8], box: Box) -> None:
+        self._mono, _ = self._is_mono(frame)
+        kind = self._kind_for(self._mono)
+        tracker = self._tracker(kind)
+        tracker.init(frame, box)
+        self._kind = kind
+        self._last = TrackResult(box, TrackState.TRACKING, 1.0, (0.0, 0.0))
+
+    def update(
+        self, frame: NDArray[np.uint8], ego_motion: NDArray[np.float64] | None = None
+    ) -> TrackResult:
+        if self._kind is None or self._last is None:
+            raise RuntimeError("init() the tracker before update()")
+        self._mono, level = self._is_mono(frame)
+        wanted = self._kind_for(self._mono)
+        if wanted != self._kind and self._last.state is TrackState.TRACKING:
+            box = self._carried(self._last, ego_motion)
+            self._log.info(
+                "tracker_switched",
+                previous=self._kind,
+                kind=wanted,
+                colourfulness=round(level, 2),
+                bbox=[round(v, 1) for v in box],
+            )
+            tracker = self._tracker(wanted)
+            tracker.init(frame, box)
+            self._kind = wanted
+            # the new tracker's first answer, on the frame it started on
+            self._last = tracker.update(frame)
+            return self._last
+        self._last = self._trackers[self._kind].update(frame, ego_motion)
+        return self._last
+
+    @staticmethod
+    def _mapped(last: TrackResult, homography: NDArray[np.float64]) -> TrackResult:
+        """`last` in the pixels of the frame `homography` maps to."""
+        boxes, velocities = apply_homography(
+            homography, centre_box(last.box)[None, :], np.array([last.velocity], dtype=float)
+        )
+        cx, cy, w, h = (float(v) for v in boxes[0])
+        vx, vy = (float(v) for v in velocities[0])
+        return TrackResult((cx - w / 2, cy - h / 2, w, h), last.state, last.confidence, (vx, vy))
+
+    def _carried(self, last: TrackResult, ego_motion: NDArray[np.float64] | None) -> Box:
+        """The last box moved into this frame: the camera's motion, then the target's."""
+        if ego_motion is not None:
+            last = self._mapped(last, ego_motion_matrix(ego_motion))
+        x, y, w, h = last.box
+        return (x + last.velocity[0], y + last.velocity[1], w, h)
+
+    def rescale(self, factor: float, center: tuple[float, float]) -> None:
+        if self._kind is None:
+            return
+        self._trackers[self._kind].rescale(factor, center)
+        if self._last is not None:  # a switch on the next frame starts from the zoomed box
+            self._last = self._mapped(self._last, zoom_homography(factor, center))
+
+    def resembles(self, frame: NDArray[np.uint8], box: Box) -> bool:
+        if self._kind is None:
+            return False
+        return self._trackers[self._kind].resembles(frame, box)
