@@ -324,7 +324,7 @@ class PtzdTracker:
         from ptzd.vision.config import TrackerConfig
 
         self.name = name
-        overrides: dict[str, Any] = {"seed": seed}
+        overrides: dict[str, Any] = {"kind": "color", "seed": seed}  # the colour filter
         if particles is not None:
             overrides["num_particles"] = particles
         self.config = TrackerConfig(**overrides)

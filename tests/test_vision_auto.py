@@ -89,7 +89,7 @@ def test_band_must_be_ordered() -> None:
     with pytest.raises(ValidationError, match="colour_above must be >= mono_below"):
         TrackerConfig.model_validate({"kind": "auto", "auto": {"mono_below": 5, "colour_above": 4}})
     with pytest.raises(ValueError, match="kind = 'auto'"):
-        AutoTracker(TrackerConfig())
+        AutoTracker(TrackerConfig(kind="color"))
 
 
 @pytest.mark.parametrize("shift", [(0.0, 0.0), (-4.0, 1.0)])

@@ -208,7 +208,7 @@ def test_colour_tracker_runs_on_grey_frames() -> None:
     rng = np.random.default_rng(3)
     base = rng.integers(20, 60, size=(120, 160), dtype=np.uint8)
     for add_axis in (False, True):
-        tracker = make_tracker(TrackerConfig(num_particles=50))
+        tracker = make_tracker(TrackerConfig(kind="color", num_particles=50))
         frames = []
         for t in range(6):
             frame = base.copy()

@@ -19,7 +19,7 @@ from tests.vision_helpers import Scene, iou
 
 
 def _run(scene: Scene, frames: int, config: TrackerConfig | None = None, ego: bool = False):
-    tracker = make_tracker(config or TrackerConfig())
+    tracker = make_tracker(config or TrackerConfig(kind="color"))
     tracker.init(scene.frame(0), scene.truth(0))
     shift = np.array(scene.shift)
     return [
@@ -77,7 +77,7 @@ def test_occlusion_handler_holds_through_a_full_occlusion_and_recovers() -> None
 
 def test_gives_up_after_max_frames_and_reacquires() -> None:
     scene = Scene(velocity=(0.0, 0.0), vanish_after=5)
-    config = TrackerConfig(occlusion={"max_frames": 10})
+    config = TrackerConfig(kind="color", occlusion={"max_frames": 10})
     tracker = make_tracker(config)
     tracker.init(scene.frame(0), scene.truth(0))
     states = [tracker.update(scene.frame(t)).state for t in range(1, 25)]
@@ -92,9 +92,9 @@ def test_gives_up_after_max_frames_and_reacquires() -> None:
 
 def test_runs_are_repeatable_with_a_seed() -> None:
     scene = Scene(velocity=(2.5, 1.0))
-    first = _run(scene, 20, TrackerConfig(seed=7))
-    second = _run(scene, 20, TrackerConfig(seed=7))
-    other = _run(scene, 20, TrackerConfig(seed=8))
+    first = _run(scene, 20, TrackerConfig(kind="color", seed=7))
+    second = _run(scene, 20, TrackerConfig(kind="color", seed=7))
+    other = _run(scene, 20, TrackerConfig(kind="color", seed=8))
     assert [r.box for r in first] == [r.box for r in second]
     assert [r.box for r in first] != [r.box for r in other]
 
@@ -110,7 +110,9 @@ def test_ego_motion_shift_is_applied_in_prediction() -> None:
 
 def test_ego_motion_homography_moves_and_scales_particles() -> None:
     scene = Scene()
-    config = TrackerConfig(motion=MotionConfig(sigma_x=0, sigma_vx=0, sigma_y=0, sigma_vy=0))
+    config = TrackerConfig(
+        kind="color", motion=MotionConfig(sigma_x=0, sigma_vx=0, sigma_y=0, sigma_vy=0)
+    )
     tracker = ParticleTracker(config, _FlatLikelihood())
     tracker.init(scene.frame(0), (100.0, 100.0, 20.0, 40.0))
     before = tracker.particles.copy()
@@ -125,7 +127,7 @@ def test_ego_motion_homography_moves_and_scales_particles() -> None:
 
 def test_rescale_scales_the_box_about_the_centre() -> None:
     scene = Scene()
-    tracker = make_tracker(TrackerConfig())
+    tracker = make_tracker(TrackerConfig(kind="color"))
     tracker.init(scene.frame(0), (100.0, 100.0, 20.0, 40.0))
     tracker.rescale(2.0, (110.0, 120.0))  # zoom in 2x about the box centre
     assert isinstance(tracker, ParticleTracker)
@@ -170,7 +172,7 @@ def test_reacquires_after_lost_when_the_target_reappears_beyond_the_coast() -> N
     # hidden for 32 frames behind a 100 px bar: LOST after max_frames, then the target walks
     # out 60-100 px from where the coasting box stopped, beyond the initial search radius
     scene = Scene(velocity=(3.0, 0.0), occluder_x=(100, 200))
-    config = TrackerConfig(occlusion={"max_frames": 10})
+    config = TrackerConfig(kind="color", occlusion={"max_frames": 10})
     tracker = make_tracker(config)
     tracker.init(scene.frame(0), scene.truth(0))
     assert isinstance(tracker, ParticleTracker)
@@ -278,7 +280,7 @@ def _edge_run(config: TrackerConfig) -> tuple[_EdgeLikelihood, list[TrackResult]
 
 def test_a_target_stuck_on_a_look_alike_occluder_edge_is_occluded_and_coasts_on() -> None:
     lik, results = _edge_run(
-        TrackerConfig(occlusion={"stall_lag": 0.5}, stillness={"still_frames": 0})
+        TrackerConfig(kind="color", occlusion={"stall_lag": 0.5}, stillness={"still_frames": 0})
     )
     hidden = results[lik.HIDE - 1 : lik.SHOW - 1]  # results[i] is frame i + 1
     # within a few frames of vanishing the stalled box is taken for an occlusion...
@@ -379,7 +381,7 @@ def _impostor_frame(t: int, target_until: int, impostor_from: int, back_from: in
 def test_only_a_match_in_every_part_ends_an_occlusion(threshold: float) -> None:
     # (the impostor's mean of parts is 0.51-0.59: the mean's threshold is put under it)
     occlusion = {"similarity_threshold": 0.5, "part_threshold": threshold}
-    config = TrackerConfig.model_validate({"occlusion": occlusion})
+    config = TrackerConfig.model_validate({"kind": "color", "occlusion": occlusion})
     tracker = make_tracker(config)
     tracker.init(_impostor_frame(0, 10, 13, 40), (60.0, 80.0, 24.0, 60.0))
     states = [tracker.update(_impostor_frame(t, 10, 13, 40)).state for t in range(1, 50)]
@@ -402,7 +404,7 @@ def test_a_detection_re_identifies_the_target_only_on_a_match_in_every_part(
 ) -> None:
     # (the mean's threshold under the impostor's mean of parts, as above)
     occlusion = {"similarity_threshold": 0.5, "detection_part_threshold": threshold}
-    tracker = make_tracker(TrackerConfig.model_validate({"occlusion": occlusion}))
+    tracker = make_tracker(TrackerConfig.model_validate({"kind": "color", "occlusion": occlusion}))
     tracker.init(_impostor_frame(0, 10, 13, 40), (60.0, 80.0, 24.0, 60.0))
     for t in range(1, 9):
         tracker.update(_impostor_frame(t, 10, 13, 40))
@@ -426,7 +428,9 @@ def _still_look_alike_frame(t: int, target_until: int) -> np.ndarray:
 
 @pytest.mark.parametrize("needs_motion", [True, False])
 def test_an_occlusion_ends_only_where_something_moved(needs_motion: bool) -> None:
-    config = TrackerConfig.model_validate({"occlusion": {"return_needs_motion": needs_motion}})
+    config = TrackerConfig.model_validate(
+        {"kind": "color", "occlusion": {"return_needs_motion": needs_motion}}
+    )
     tracker = make_tracker(config)
     tracker.init(_still_look_alike_frame(0, 10), (60.0, 80.0, 24.0, 60.0))
     results = [tracker.update(_still_look_alike_frame(t, 10)) for t in range(1, 45)]
@@ -460,7 +464,7 @@ def _hedge_frame(t: int) -> tuple[np.ndarray, tuple[float, float, float, float]]
 @pytest.mark.parametrize("threshold", [0.75, 0.0])
 def test_an_occluded_target_s_visible_half_is_followed(threshold: float) -> None:
     occlusion = {"follow_part_threshold": threshold, "return_needs_motion": True}
-    tracker = make_tracker(TrackerConfig.model_validate({"occlusion": occlusion}))
+    tracker = make_tracker(TrackerConfig.model_validate({"kind": "color", "occlusion": occlusion}))
     tracker.init(_hedge_frame(0)[0], _hedge_frame(0)[1])
     results = [(tracker.update(_hedge_frame(t)[0]), _hedge_frame(t)[1]) for t in range(1, 70)]
     states = {r.state for r, _ in results[15:]}
@@ -496,7 +500,9 @@ def _wall_frame(t: int) -> tuple[np.ndarray, tuple[float, float, float, float]]:
 def test_a_look_alike_s_top_further_back_is_not_followed(seed: int, max_step_y: float) -> None:
     occlusion = {"follow_max_step_x": 1.0 if max_step_y < 1 else 20.0,
                  "follow_max_step_y": max_step_y}  # fmt: skip
-    tracker = make_tracker(TrackerConfig.model_validate({"seed": seed, "occlusion": occlusion}))
+    tracker = make_tracker(
+        TrackerConfig.model_validate({"kind": "color", "seed": seed, "occlusion": occlusion})
+    )
     tracker.init(_wall_frame(0)[0], (100.0, 110.0, 24.0, 60.0))
     on_the_other = []
     states = []

@@ -81,7 +81,9 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
         ("walking", walking, 10),
         ("standing, test off", standing, 0),
     ]:
-        tracker = make_tracker(TrackerConfig(stillness={"still_frames": still_frames}))
+        tracker = make_tracker(
+            TrackerConfig(kind="color", stillness={"still_frames": still_frames})
+        )
         tracker.init(scene.frame(0), scene.truth(0))
         results[name] = [tracker.update(scene.frame(t)).state for t in range(1, 40)]
     # nothing moved in the standing target's box for 10 frames: occluded, then lost
@@ -95,7 +97,7 @@ def test_the_tracker_lets_go_of_a_box_in_which_nothing_moves() -> None:
 @pytest.mark.parametrize(
     "config",
     [
-        TrackerConfig(stillness={"still_frames": 25}),
+        TrackerConfig(kind="color", stillness={"still_frames": 25}),
         TrackerConfig(kind="rf", rf={"still_frames": 25}),
         TrackerConfig(kind="svm", svm={"still_frames": 25}),
     ],

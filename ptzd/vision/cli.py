@@ -47,10 +47,11 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     track.add_argument(
         "--tracker",
         choices=TRACKERS,
-        default="color",
+        default=None,
         help=(
             "tracker: color (seed 002), rf (seed 000, grey/thermal), svm (seed 004), auto"
-            " (color on colour frames, rf on grey ones: a day/night camera; [tracker.auto])"
+            " (color on colour frames, rf on grey ones: a day/night camera; [tracker.auto]);"
+            " default: the config's [tracker] kind, auto"
         ),
     )
     track.add_argument("--out", required=True, metavar="OUT.json", help="where to write boxes")
@@ -102,16 +103,17 @@ def _tracker_config(args: argparse.Namespace) -> TrackerConfig:
         from ptzd.config import load_config
 
         config = load_config(args.config).tracker
-    changes: dict[str, Any] = {"kind": args.tracker}
+    changes: dict[str, Any] = {} if args.tracker is None else {"kind": args.tracker}
     if args.seed is not None:
         changes["seed"] = args.seed
     if args.particles is not None:
         changes["num_particles"] = args.particles
     data = config.model_dump()
-    if args.particles is not None and args.tracker in ("rf", "svm"):
-        # rf and svm keep their own particle counts in their sub-tables
+    kind = changes.get("kind", config.kind)
+    if args.particles is not None and kind in ("rf", "svm"):
+        # rf and svm keep their own particle counts in their sub-tables (auto: color's here)
         changes.pop("num_particles")
-        data[args.tracker] = {**data[args.tracker], "num_particles": args.particles}
+        data[kind] = {**data[kind], "num_particles": args.particles}
     try:
         return TrackerConfig.model_validate({**data, **changes})
     except ValueError as exc:

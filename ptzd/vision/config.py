@@ -435,7 +435,7 @@ class TrackerConfig(StrictModel):
     """Which tracker runs and its particle-filter parameters."""
 
     # auto: [tracker.auto]'s day tracker on colour frames, its night tracker on grey ones
-    kind: Literal["color", "rf", "svm", "auto"] = "color"
+    kind: Literal["color", "rf", "svm", "auto"] = "auto"
     num_particles: int = Field(default=300, ge=10, le=5000)
     seed: int = Field(default=0, ge=0)
     # mean: seed eq. 15 weighted mean of all particles; top: weighted mean of the top_rate share.
