@@ -4,8 +4,8 @@ A day/night dome switches to monochrome at dusk (its IR-cut filter out) and back
 often while it follows someone. A colour model learned by day does not match the same
 person in near-infrared grey, and colour histograms say little on grey frames, so the
 colour tracker loses the target on the switch and tracks worse at night. This tracker
-looks at every frame's colourfulness (`colourfulness`, thresholds with a dead band in
-`AutoConfig`) and runs `AutoConfig.day` or `AutoConfig.night`. When the frames change
+looks at every frame's share of coloured pixels (`colour_share`, thresholds with a dead
+band in `AutoConfig`) and runs `AutoConfig.day` or `AutoConfig.night`. When the frames change
 while the target is TRACKING, the other tracker starts on the target's box carried into
 the new frame (the camera's motion and the target's own); while it is occluded or lost
 the switch waits for the next `init` (a re-acquisition) or for the running tracker to
@@ -22,20 +22,34 @@ from ptzd.vision.config import TrackerConfig, TrackerKind
 from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix, zoom_homography
 from ptzd.vision.tracking import Box, Tracker, TrackResult, TrackState, centre_box, make_tracker
 
+# Pixels whose brightest channel is under this carry no colour to speak of (sensor noise,
+# and in the simulator the black outside the wide video): they are left out.
+_DARK = 16
+# A pixel is coloured when its channels spread by at least this many levels. A grey frame
+# comes back from a video decoder with every pixel spread by 0-3 (its YUV -> BGR rounding),
+# never more; on colour footage even a washed-out view has a fifth of its pixels over it.
+_COLOURED = 8
 
-def colourfulness(frame: NDArray[np.uint8], step: int = 8) -> float:
-    """Mean spread between a pixel's largest and smallest channel over every `step`-th row
-    and column, in levels (0 for single-channel frames and for grey ones in three)."""
+
+def colour_share(frame: NDArray[np.uint8], step: int = 8) -> float:
+    """Share (0..1) of the lit pixels, on every `step`-th row and column, that are coloured:
+    0 for single-channel frames, for grey ones in three channels and for frames with
+    nothing lit."""
     if frame.ndim == 2 or (frame.ndim == 3 and frame.shape[2] == 1):
         return 0.0
     if frame.ndim != 3 or frame.shape[2] != 3:
         raise ValueError(f"frame must be HxW, HxWx1 or HxWx3, got shape {frame.shape}")
     grid = frame[::step, ::step]
     b, g, r = grid[..., 0], grid[..., 1], grid[..., 2]
-    # channel by channel: 7x faster than max/min along the last axis of a strided view;
-    # max >= min per pixel, so the uint8 difference cannot wrap
-    spread = np.maximum(np.maximum(b, g), r) - np.minimum(np.minimum(b, g), r)
-    return float(np.mean(spread))
+    # channel by channel: 7x faster than max/min along the last axis of a strided view
+    brightest = np.maximum(np.maximum(b, g), r)
+    lit = brightest >= _DARK
+    lit_count = np.count_nonzero(lit)
+    if lit_count == 0:
+        return 0.0
+    # brightest >= darkest per pixel, so the uint8 difference cannot wrap
+    coloured = (brightest - np.minimum(np.minimum(b, g), r) >= _COLOURED) & lit
+    return float(np.count_nonzero(coloured)) / float(lit_count)
 
 
 class AutoTracker:
@@ -63,14 +77,14 @@ class AutoTracker:
 
     def _is_mono(self, frame: NDArray[np.uint8]) -> tuple[bool, float]:
         auto = self._config.auto
-        level = colourfulness(frame, auto.sample_step)
-        if level < auto.mono_below:
-            return True, level
-        if level > auto.colour_above:
-            return False, level
+        share = colour_share(frame, auto.sample_step)
+        if share < auto.mono_below:
+            return True, share
+        if share > auto.colour_above:
+            return False, share
         if self._mono is None:  # in the band with nothing to go on: the nearer side
-            return level < (auto.mono_below + auto.colour_above) / 2, level
-        return self._mono, level
+            return share < (auto.mono_below + auto.colour_above) / 2, share
+        return self._mono, share
 
     def _kind_for(self, mono: bool) -> TrackerKind:
         return self._config.auto.night if mono else self._config.auto.day
@@ -88,7 +102,7 @@ class AutoTracker:
     ) -> TrackResult:
         if self._kind is None or self._last is None:
             raise RuntimeError("init() the tracker before update()")
-        self._mono, level = self._is_mono(frame)
+        self._mono, share = self._is_mono(frame)
         wanted = self._kind_for(self._mono)
         if wanted != self._kind and self._last.state is TrackState.TRACKING:
             box = self._carried(self._last, ego_motion)
@@ -96,7 +110,7 @@ class AutoTracker:
                 "tracker_switched",
                 previous=self._kind,
                 kind=wanted,
-                colourfulness=round(level, 2),
+                colour_share=round(share, 3),
                 bbox=[round(v, 1) for v in box],
             )
             tracker = self._tracker(wanted)

@@ -402,25 +402,23 @@ class AutoConfig(StrictModel):
     """`kind = "auto"`: one tracker for colour frames, another for monochrome ones (ours).
 
     A day/night camera drops its IR-cut filter at dusk and sends grey frames (still three
-    channels from the decoder, all alike); a thermal camera sends grey always. Colour
-    histograms carry nothing on grey frames, and a model learned in colour does not match
-    the same person in near-infrared. Each frame's colourfulness is the mean, over a sparse
-    grid, of the spread between a pixel's largest and smallest channel (0..255 levels; 0 on
-    a decoded grey frame, about 43 on vtest.avi). Under `mono_below` a frame is monochrome,
-    over `colour_above` colour, in between it is what the previous frame was; when it
-    changes the other tracker takes over on the target's box (ptzd/vision/auto.py).
+    channels from the decoder, all alike up to its rounding); a thermal camera sends grey
+    always. Colour histograms carry nothing on grey frames, and a model learned in colour
+    does not match the same person in near-infrared. Each frame's colour share is the share
+    of its lit pixels, on a sparse grid, whose channels spread by 8 levels or more: 0 on a
+    decoded grey frame (the decoder's rounding spreads them by 0-3), 0.2-0.85 on the views
+    of vtest.avi the closed loop renders. Under `mono_below` a frame is monochrome, over
+    `colour_above` colour, in between it is what the previous frame was; when it changes
+    the other tracker takes over on the target's box (ptzd/vision/auto.py).
     """
 
     day: TrackerKind = "color"
     # rf: the best of the three on grey frames (docs/tracking.md "Day and night").
     night: TrackerKind = "rf"
-    # Thresholds on the mean channel spread, levels. Grey frames come back from a video
-    # decoder at 2-3 (its YUV -> BGR rounding: MJPEG 2, MPEG-4 3); colour footage spreads
-    # 30-50 (vtest.avi 43, the synthetic scenes 31-48); vtest.avi with its saturation cut
-    # to a quarter and its brightness to a third, 4: taken as monochrome, which costs little
-    # (rf on colour frames is on par with color on vtest.avi).
-    mono_below: float = Field(default=6.0, gt=0.0, le=255.0)
-    colour_above: float = Field(default=10.0, gt=0.0, le=255.0)
+    # Thresholds on the colour share (0..1). A view that is mostly a pale road at 20x with a
+    # red jacket in it may be at a few per cent: in the band it stays what it was.
+    mono_below: float = Field(default=0.02, gt=0.0, le=1.0)
+    colour_above: float = Field(default=0.05, gt=0.0, le=1.0)
     # Every this many pixels along each axis are looked at (a 640x480 frame: 4800 of them).
     sample_step: int = Field(default=8, ge=1, le=64)
 
