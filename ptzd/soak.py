@@ -1,6 +1,6 @@
 """Soak harness: the real daemon, the simulated dome and a real broker, for a long time.
 
-`ptzd soak --minutes N --report DIR [--faults serial-reset,stream-stall,broker-restart]`:
+`ptzd soak --minutes N --report DIR [--faults day-night,serial-reset,stream-stall,broker-restart]`:
 
 - `ptzd sim-camera` runs as its own process (MJPEG over HTTP, Pelco over TCP);
 - `ptzd run` runs as another process with a real config file, its serial port going through
@@ -28,12 +28,18 @@ Faults, each with its expected recovery (checked, see docs/reliability.md):
   6 s of its last speed at once: a dome thrown 56 deg off, staring at the ground.)
 - `broker-restart`: mosquitto is killed (SIGKILL) and restarted 2 s later on the same port.
   Expect `availability` = `online` (retained) to be republished.
+- `day-night`: the sim-camera's dome goes to night mode (grey views, its IR-cut filter out;
+  `ptzd.sim.cli.DUSK_SIGNAL`) for 15 s, then back (`DAWN_SIGNAL`); an operator selects a
+  walker after each. Expect the daemon's tracker (`[tracker] kind = "auto"`) to switch to
+  its night kind within 15 s of dusk (at once for a tracked target, else at the next lock)
+  and back to its day kind within 15 s of dawn, and frames to keep coming.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import os
 import re
@@ -57,8 +63,11 @@ from ptzd.pelco.codec import FrameParser, Motion
 from ptzd.sim.groundtruth import GroundTruth
 from ptzd.sim.sources import open_wide_source
 
-FAULTS = ("serial-reset", "stream-stall", "broker-restart")
+# in this order in the CI soak: day-night first, so that its one-time step in memory comes
+# before the warm-up ends
+FAULTS = ("day-night", "serial-reset", "stream-stall", "broker-restart")
 STALL_S = 6.0
+NIGHT_S = 15.0  # `day-night`: how long the night lasts, and how long each switch may take
 STOP_WITHIN_S = 1.5  # max_track_age_s (0.5) + a control tick + the wire
 OUTAGE_S = 2.0
 WATCHDOG_USEC = 10_000_000  # pings every 5 s, as the shipped unit's WatchdogSec=10
@@ -397,6 +406,22 @@ def _last_probe(path: Path) -> dict[str, Any]:
     return {}
 
 
+def _switched_to(log: Path, offset: int, kind: str) -> bool:
+    """Whether the daemon's JSON log, from byte `offset` on, says its tracker switched to
+    `kind` (the `tracker_switched` event of ptzd/vision/auto.py)."""
+    with log.open("rb") as f:
+        f.seek(offset)
+        text = f.read().decode(errors="replace")
+    for line in text.splitlines():
+        if '"tracker_switched"' not in line:
+            continue
+        with contextlib.suppress(ValueError):
+            event = json.loads(line[line.index("{") :])
+            if event.get("event") == "tracker_switched" and event.get("kind") == kind:
+                return True
+    return False
+
+
 def _last_json_lines(path: Path, count: int) -> list[dict[str, Any]]:
     """The last `count` complete JSON lines (oldest first) of a file another process is
     appending to (fewer if it has fewer)."""
@@ -726,7 +751,7 @@ class Soak:
                     break
                 if schedule and self.now() >= schedule[0][0]:
                     _, name = schedule.pop(0)
-                    await self._inject(name, proxy, sim, broker, notify, watcher)
+                    await self._inject(name, proxy, sim, broker, notify, watcher, scene_truth)
                     continue
                 if self.now() >= next_sample:
                     self._sample(daemon.pid, probe, proxy, notify, watcher)
@@ -797,6 +822,7 @@ class Soak:
         broker: Mosquitto,
         notify: NotifySocket,
         watcher: MqttWatcher,
+        truth: GroundTruth,
     ) -> None:
         start = self.now()
         entry: dict[str, Any] = {"fault": name, "at_s": round(start, 2)}
@@ -851,7 +877,44 @@ class Soak:
                 "recovered": recovered,
                 "recovery_s": round(watcher.online_times[-1] - end, 2) if recovered else None,
             }
+        elif name == "day-night":
+            entry |= await self._day_night(sim, broker, notify, truth)
         self.fault_log.append(entry)
+
+    async def _day_night(
+        self,
+        sim: asyncio.subprocess.Process,
+        broker: Mosquitto,
+        notify: NotifySocket,
+        truth: GroundTruth,
+    ) -> dict[str, Any]:
+        from ptzd.sim.cli import DAWN_SIGNAL, DUSK_SIGNAL
+        from ptzd.vision.config import AutoConfig
+
+        kinds = AutoConfig()  # the soak's daemon runs the default tracker: auto
+        log = self.dir / "daemon.log"
+        switches: dict[str, float | None] = {}
+        frames_before = notify.frames
+        for phase, sig, kind in (("night", DUSK_SIGNAL, kinds.night),
+                                 ("day", DAWN_SIGNAL, kinds.day)):  # fmt: skip
+            offset = log.stat().st_size
+            began = self.now()
+            sim.send_signal(sig)
+            await self._select(broker.port, truth)  # someone to lock on in the new light
+            switched_now = functools.partial(_switched_to, log, offset, kind)
+            await self._wait_for(switched_now, NIGHT_S)
+            switched = switched_now()
+            switches[phase] = round(self.now() - began, 2) if switched else None
+            await asyncio.sleep(max(0.0, began + NIGHT_S - self.now()))
+        return {
+            "ended_s": round(self.now(), 2),
+            "expected": f"switch to {kinds.night} within {NIGHT_S:g} s of dusk and to "
+            f"{kinds.day} within {NIGHT_S:g} s of dawn; frames keep coming",
+            "night_switch_s": switches["night"],
+            "day_switch_s": switches["day"],
+            "recovered": None not in switches.values() and notify.frames > frames_before,
+            "recovery_s": switches["day"],
+        }
 
     async def _select(self, mqtt_port: int, truth: GroundTruth) -> bool:
         """Pick the biggest walker well inside the view and fully visible (ground truth of
@@ -933,6 +996,15 @@ class Soak:
                 while not predicate():  # noqa: ASYNC110
                     await asyncio.sleep(0.1)
 
+    def _warm_from(self) -> float:
+        """Where the leak checks start: after the warm-up, and after the first `day-night`
+        (the first night builds the night tracker, whose learning memory fills up to ~8 MB
+        once in its first ~60 frames and stays: a step, not a leak)."""
+        opts = self.options
+        cut = min(opts.warmup_s, opts.minutes * 30)
+        nights = [float(f["ended_s"]) for f in self.fault_log if f["fault"] == "day-night"]
+        return max([cut, *nights[:1]])
+
     def _report(
         self,
         exit_code: int | None,
@@ -942,7 +1014,7 @@ class Soak:
         watcher: MqttWatcher | None,
     ) -> dict[str, Any]:
         opts = self.options
-        warm = [s for s in self.samples if s["t"] >= min(opts.warmup_s, opts.minutes * 30)]
+        warm = [s for s in self.samples if s["t"] >= self._warm_from()]
         fds = [s["fds"] for s in warm if s["fds"] >= 0]
         threads = [s["threads"] for s in warm if s.get("threads", -1) >= 0]
         tasks = [s["tasks"] for s in warm if s["tasks"] is not None]
@@ -959,6 +1031,7 @@ class Soak:
         summary = {
             "duration_s": round(elapsed, 1),
             "daemon_exit_code": exit_code,
+            "leak_checks_from_s": round(self._warm_from(), 2),
             **memory,
             "fds_min_max": [min(fds), max(fds)] if fds else None,
             "threads_min_max": [min(threads), max(threads)] if threads else None,

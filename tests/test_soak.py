@@ -1,6 +1,6 @@
 """The soak harness: option checks, /proc sampling, plots, and real (short) soaks.
 
-The CI soak (`-m slow`) runs the three processes for real with all three faults and checks
+The CI soak (`-m slow`) runs the three processes for real with all four faults and checks
 the report: clean exit, dome left stopped, no leaks, every fault recovered as documented.
 """
 
@@ -149,7 +149,7 @@ def test_virtual_clock_soak_probes_the_sim_process(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.timeout(200)
-def test_ci_soak_with_three_faults(tmp_path: Path) -> None:
+def test_ci_soak_with_every_fault(tmp_path: Path) -> None:
     started = time.monotonic()
     run = subprocess.run(
         [sys.executable, "-m", "ptzd", "soak", "--minutes", str(CI_SOAK_MINUTES),
@@ -163,6 +163,10 @@ def test_ci_soak_with_three_faults(tmp_path: Path) -> None:
     )
     assert [f["fault"] for f in report["faults"]] == list(FAULTS)
     assert all(f["recovered"] for f in report["faults"])
+    night = next(f for f in report["faults"] if f["fault"] == "day-night")
+    assert night["night_switch_s"] <= 15 and night["day_switch_s"] <= 15
+    # the leak checks start after the first night (the night tracker's one-time memory)
+    assert report["summary"]["leak_checks_from_s"] >= night["ended_s"]
     summary = report["summary"]
     assert summary["daemon_exit_code"] == 0 and summary["last_motion_is_stop"]
     assert summary["rss_anon_growth_mb"] < CI_HEAP_GROWTH_MB

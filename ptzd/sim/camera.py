@@ -132,6 +132,8 @@ class SimCamera:
         self.foreign_frames = 0  # frames addressed to another dome on the same line
         # the wide frame last read, ready to warp: renders faster than the source reuse it
         self._prepared: tuple[int, PreparedWide] | None = None
+        # night mode switched at run time (the soak's `day-night`), on top of night_after_s
+        self.night = False
 
     # --- serial --------------------------------------------------------------------------
 
@@ -167,8 +169,9 @@ class SimCamera:
         if self._prepared is None or self._prepared[0] != video_frame:
             self._prepared = (video_frame, self.model.prepare(self.source.read(video_frame)))
         image = self.model.render(self._prepared[1], pose)
-        night = self.config.night_after_s
-        if night is not None and t - self.epoch >= night and image.ndim == 3:  # thermal: grey
+        dusk = self.config.night_after_s
+        night = self.night or (dusk is not None and t - self.epoch >= dusk)
+        if night and image.ndim == 3:  # a thermal view is grey already
             image = to_bgr(to_grey(image))
         frame = SimFrame(image, t, index, video_frame, pose)
         self.frames_rendered += 1

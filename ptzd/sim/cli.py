@@ -223,6 +223,7 @@ async def _run_camera(
             camera.listeners.append(mjpeg.publish)
             print(f"http {await mjpeg.start()}", flush=True)
             _stall_on_signals(mjpeg)
+        _night_on_signals(camera)
         await _drive(camera, clock, duration, replay)
     finally:
         if pty_endpoint is not None:
@@ -258,6 +259,19 @@ def _stall_on_signals(mjpeg: MjpegServer) -> None:
     loop = asyncio.get_running_loop()
     loop.add_signal_handler(signal.SIGUSR1, mjpeg.stall, True)
     loop.add_signal_handler(signal.SIGUSR2, mjpeg.stall, False)
+
+
+# the soak's `day-night`: real-time signals, the user ones being the stream's
+DUSK_SIGNAL = signal.SIGRTMIN
+DAWN_SIGNAL = signal.SIGRTMIN + 1
+
+
+def _night_on_signals(camera: SimCamera) -> None:
+    """DUSK_SIGNAL puts the dome in night mode (grey views, as with its IR-cut filter out),
+    DAWN_SIGNAL back in day mode."""
+    loop = asyncio.get_running_loop()
+    loop.add_signal_handler(DUSK_SIGNAL, setattr, camera, "night", True)
+    loop.add_signal_handler(DAWN_SIGNAL, setattr, camera, "night", False)
 
 
 async def _drive(

@@ -90,8 +90,10 @@ class AutoTracker:
         return self._config.auto.night if mono else self._config.auto.day
 
     def init(self, frame: NDArray[np.uint8], box: Box) -> None:
-        self._mono, _ = self._is_mono(frame)
+        self._mono, share = self._is_mono(frame)
         kind = self._kind_for(self._mono)
+        if self._kind is not None and kind != self._kind:
+            self._log_switch(kind, share, box, "init")
         tracker = self._tracker(kind)
         tracker.init(frame, box)
         self._kind = kind
@@ -106,13 +108,7 @@ class AutoTracker:
         wanted = self._kind_for(self._mono)
         if wanted != self._kind and self._last.state is TrackState.TRACKING:
             box = self._carried(self._last, ego_motion)
-            self._log.info(
-                "tracker_switched",
-                previous=self._kind,
-                kind=wanted,
-                colour_share=round(share, 3),
-                bbox=[round(v, 1) for v in box],
-            )
+            self._log_switch(wanted, share, box, "frames")
             tracker = self._tracker(wanted)
             tracker.init(frame, box)
             self._kind = wanted
@@ -121,6 +117,18 @@ class AutoTracker:
             return self._last
         self._last = self._trackers[self._kind].update(frame, ego_motion)
         return self._last
+
+    def _log_switch(self, kind: TrackerKind, share: float, box: Box, reason: str) -> None:
+        """`reason`: "frames" (they changed while the target was tracked) or "init" (a new
+        lock on frames of the other kind)."""
+        self._log.info(
+            "tracker_switched",
+            previous=self._kind,
+            kind=kind,
+            reason=reason,
+            colour_share=round(share, 3),
+            bbox=[round(v, 1) for v in box],
+        )
 
     @staticmethod
     def _mapped(last: TrackResult, homography: NDArray[np.float64]) -> TrackResult:
