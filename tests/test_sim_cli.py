@@ -248,3 +248,49 @@ def test_sim_camera_stream_stalls_on_sigusr1_while_the_dome_takes_commands(
     after = [c for c in camera if float(c["t"]) > stop_t + 0.3]  # type: ignore[arg-type]
     assert after and len({c["pan"] for c in after}) == 1
     assert float(after[0]["pan"]) > 0.0  # type: ignore[arg-type]
+
+
+def test_sim_camera_goes_to_night_mode_on_the_dusk_signal(wide_video: Path) -> None:
+    """The soak's `day-night`: DUSK_SIGNAL turns the MJPEG views grey, DAWN_SIGNAL back."""
+    import contextlib
+    import socket
+    import time
+
+    from ptzd.sim.cli import DAWN_SIGNAL, DUSK_SIGNAL
+    from ptzd.vision.auto import colour_share
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "ptzd", "--log-format", "json", "sim-camera", "--video",
+         str(wide_video), "--loop", "--duration", "6", "--http", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert process.stdout is not None
+        process.stdout.readline()  # the serial port
+        host, port = process.stdout.readline().split()[1].split("/")[2].split(":")
+        stream = socket.create_connection((host, int(port)), timeout=5)
+        stream.sendall(b"GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+
+        def newest_share(after_s: float) -> float:
+            """The colour share of the last whole JPEG part received within `after_s`."""
+            stream.settimeout(0.1)
+            data = b""
+            end = time.monotonic() + after_s
+            while time.monotonic() < end:
+                with contextlib.suppress(TimeoutError):
+                    data += stream.recv(65536)
+            last_end = data.rindex(b"\xff\xd9") + 2
+            start = data.rindex(b"\xff\xd8", 0, last_end)
+            image = cv2.imdecode(np.frombuffer(data[start:last_end], np.uint8), cv2.IMREAD_COLOR)
+            return colour_share(np.asarray(image, np.uint8))
+
+        assert newest_share(0.5) > 0.5
+        process.send_signal(DUSK_SIGNAL)
+        assert newest_share(0.5) == 0.0
+        process.send_signal(DAWN_SIGNAL)
+        assert newest_share(0.5) > 0.5
+        stream.close()
+        _, err = process.communicate(timeout=30)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err

@@ -153,7 +153,11 @@ def test_dusk_mid_track_hands_over_on_the_target(
     events = [json.loads(line) for line in log.getvalue().splitlines()]
     switched = [e for e in events if e["event"] == "tracker_switched"]
     assert len(switched) == 1
-    assert (switched[0]["previous"], switched[0]["kind"]) == ("color", "rf")
+    assert (switched[0]["previous"], switched[0]["kind"], switched[0]["reason"]) == (
+        "color",
+        "rf",
+        "frames",
+    )
     # rf starts on the colour tracker's last box carried into the grey frame by the
     # camera's motion and the walker's (left out, either is 3-4 px off: IoU 0.7-0.8)
     assert iou(tuple(switched[0]["bbox"]), scene.truth(20)) > 0.85
@@ -187,8 +191,14 @@ def test_no_switch_while_the_target_is_out_of_sight() -> None:
         result = tracker.update(_grey(scene.frame(t)))
         assert tracker.kind == "color"
     back = Scene(velocity=(2.0, 0.5))
+    log = io.StringIO()
+    configure_logging(level="info", fmt="json", stream=log)
     tracker.init(_grey(back.frame(40)), back.truth(40))
     assert tracker.kind == "rf"
+    events = [json.loads(line) for line in log.getvalue().splitlines()]
+    assert [(e["event"], e["kind"], e["reason"]) for e in events] == [
+        ("tracker_switched", "rf", "init")
+    ]
     assert tracker.update(_grey(back.frame(41))).state is TrackState.TRACKING
 
 
