@@ -124,16 +124,25 @@ def test_scaled_sequence_is_what_a_camera_of_that_resolution_sees() -> None:
         scaled(seq, 0.0)
 
 
-@pytest.mark.parametrize("value", ["0", "-1", "9", "nan"])
-def test_a_frame_scale_out_of_range_is_refused_before_anything_runs(
-    value: str, capsys: pytest.CaptureFixture[str]
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        *[
+            ("--frame-scale", v, "--frame-scale must be within 0.05..8")
+            for v in ("0", "-1", "9", "nan")
+        ],
+        *[("--dusk", v, "--dusk must be within 0..1") for v in ("-0.1", "1.5", "nan")],
+    ],
+)
+def test_an_option_out_of_range_is_refused_before_anything_runs(
+    option: str, value: str, message: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from bench.track_learned import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["--frame-scale", value, "--classes", "vtest", "--no-speed"])
+        main([option, value, "--classes", "vtest", "--no-speed"])
     assert exc.value.code == 2
-    assert "--frame-scale must be within 0.05..8" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
 
 
 def test_greyed_sequence_is_single_channel_with_the_same_truth() -> None:
@@ -169,15 +178,3 @@ def test_dusk_turns_the_frames_grey_from_its_point_on() -> None:
     assert all(np.all(f == 76) for f in dusk(seq, 0.0).frames)
     with pytest.raises(ValueError, match=r"within 0\.\.1"):
         dusk(seq, 1.5)
-
-
-@pytest.mark.parametrize("value", ["-0.1", "1.5", "nan"])
-def test_a_dusk_out_of_range_is_refused_before_anything_runs(
-    value: str, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from bench.track_learned import main
-
-    with pytest.raises(SystemExit) as exc:
-        main(["--dusk", value, "--classes", "vtest", "--no-speed"])
-    assert exc.value.code == 2
-    assert "--dusk must be within 0..1" in capsys.readouterr().err

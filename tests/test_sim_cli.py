@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -185,16 +188,32 @@ def test_sim_camera_bad_input(
     assert message in result.stderr
 
 
+def _open_mjpeg(url: str) -> socket.socket:
+    """A raw HTTP connection to the sim-camera's MJPEG stream at `url`, request sent."""
+    host, port = url.split("/")[2].split(":")
+    stream = socket.create_connection((host, int(port)), timeout=5)
+    stream.sendall(b"GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+    return stream
+
+
+def _received_within(stream: socket.socket, seconds: float) -> bytes:
+    """Whatever the stream delivers in the next `seconds`."""
+    stream.settimeout(0.1)
+    data = b""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        with contextlib.suppress(TimeoutError):
+            data += stream.recv(65536)
+    return data
+
+
 def test_sim_camera_stream_stalls_on_sigusr1_while_the_dome_takes_commands(
     wide_video: Path, tmp_path: Path
 ) -> None:
     """The soak's `stream-stall`: SIGUSR1 stops the MJPEG parts, the dome still obeys the
     serial line (a STOP sent during the stall stops it then, not on resume), SIGUSR2 resumes."""
-    import contextlib
     import itertools
     import signal
-    import socket
-    import time
 
     import serial
 
@@ -209,19 +228,10 @@ def test_sim_camera_stream_stalls_on_sigusr1_while_the_dome_takes_commands(
     try:
         assert process.stdout is not None
         pty_path = process.stdout.readline().split()[1]
-        url = process.stdout.readline().split()[1]
-        host, port = url.split("/")[2].split(":")
-        stream = socket.create_connection((host, int(port)), timeout=5)
-        stream.sendall(b"GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+        stream = _open_mjpeg(process.stdout.readline().split()[1])
 
         def parts_within(seconds: float) -> int:
-            stream.settimeout(0.1)
-            data = b""
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                with contextlib.suppress(TimeoutError):
-                    data += stream.recv(65536)
-            return data.count(b"X-Frame:")
+            return _received_within(stream, seconds).count(b"X-Frame:")
 
         assert parts_within(0.5) > 2
         with serial.Serial(pty_path, baudrate=4800, timeout=1) as line:
@@ -252,9 +262,6 @@ def test_sim_camera_stream_stalls_on_sigusr1_while_the_dome_takes_commands(
 
 def test_sim_camera_goes_to_night_mode_on_the_dusk_signal(wide_video: Path) -> None:
     """The soak's `day-night`: DUSK_SIGNAL turns the MJPEG views grey, DAWN_SIGNAL back."""
-    import contextlib
-    import socket
-    import time
 
     from ptzd.sim.cli import DAWN_SIGNAL, DUSK_SIGNAL
     from ptzd.vision.auto import colour_share
@@ -267,18 +274,11 @@ def test_sim_camera_goes_to_night_mode_on_the_dusk_signal(wide_video: Path) -> N
     try:
         assert process.stdout is not None
         process.stdout.readline()  # the serial port
-        host, port = process.stdout.readline().split()[1].split("/")[2].split(":")
-        stream = socket.create_connection((host, int(port)), timeout=5)
-        stream.sendall(b"GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
+        stream = _open_mjpeg(process.stdout.readline().split()[1])
 
         def newest_share(after_s: float) -> float:
             """The colour share of the last whole JPEG part received within `after_s`."""
-            stream.settimeout(0.1)
-            data = b""
-            end = time.monotonic() + after_s
-            while time.monotonic() < end:
-                with contextlib.suppress(TimeoutError):
-                    data += stream.recv(65536)
+            data = _received_within(stream, after_s)
             last_end = data.rindex(b"\xff\xd9") + 2
             start = data.rindex(b"\xff\xd8", 0, last_end)
             image = cv2.imdecode(np.frombuffer(data[start:last_end], np.uint8), cv2.IMREAD_COLOR)

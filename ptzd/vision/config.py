@@ -415,8 +415,9 @@ class AutoConfig(StrictModel):
     day: TrackerKind = "color"
     # rf: the best of the three on grey frames (docs/tracking.md "Day and night").
     night: TrackerKind = "rf"
-    # Thresholds on the colour share (0..1). A view that is mostly a pale road at 20x with a
-    # red jacket in it may be at a few per cent: in the band it stays what it was.
+    # Thresholds on the colour share (0..1). Decoded grey frames are at 0; the least
+    # colourful view the closed loop rendered of the vtest tracks (a man in black on the
+    # pale road) at 0.21.
     mono_below: float = Field(default=0.02, gt=0.0, le=1.0)
     colour_above: float = Field(default=0.05, gt=0.0, le=1.0)
     # Every this many pixels along each axis are looked at (a 640x480 frame: 4800 of them).
