@@ -232,16 +232,70 @@ def test_particles_drift_with_the_target(seed: int) -> None:
     assert velocities[True] == pytest.approx(8.0, abs=1.0)  # learned from confident frames
 
 
-def test_a_held_box_reports_no_motion_and_the_drift_resumes_after() -> None:
-    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15)
-    tracker = SvmTracker(TrackerConfig(kind="svm"))
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (-5.0, 1.0)])
+def test_a_hidden_walker_is_coasted_and_the_drift_resumes_after(
+    shift: tuple[float, float],
+) -> None:
+    # he vanishes after frame 15 (the truth walks on); with the camera panning too, the
+    # coast must move with the image as well as with him
+    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15, shift=shift)
+    ego = np.array(shift) if shift != (0.0, 0.0) else None
+    hidden = {}
+    for coast in (True, False):
+        tracker = SvmTracker(TrackerConfig(kind="svm", svm={"coast": coast}))
+        tracker.init(scene.frame(0), scene.truth(0))
+        results = [tracker.update(scene.frame(t), ego) for t in range(1, 26)]
+        assert results[14].state is TrackState.TRACKING and results[14].velocity[0] > 6.0
+        hidden[coast] = results[16:]
+        assert all(r.state is TrackState.OCCLUDED for r in hidden[coast])
+        assert tracker._velocity[0] > 6.0  # kept for the particles when he turns up again
+    # coasting: the box walks on with him, reporting the speed it walks at
+    for t, r in enumerate(hidden[True], 17):
+        (x, _, w, _), (tx, _, tw, _) = r.box, scene.truth(t)
+        assert abs(x + w / 2 - (tx + tw / 2)) < 0.5 * tw, t
+        assert r.velocity[0] == pytest.approx(8.0, abs=1.5)
+    # held (the seed): the box stays where he was last seen, reporting no motion
+    held = hidden[False]
+    assert all(r.velocity == (0.0, 0.0) for r in held)
+    assert held[-1].box[0] - held[0].box[0] == pytest.approx(shift[0] * (len(held) - 1), abs=0.5)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_walker_who_stops_is_not_coasted_away_from(seed: int) -> None:
+    # he walks 4 px a frame for 20 frames and stops with a third of him behind a bar (so
+    # the SVM is no longer sure of him, and its last sure steps still say 4 px a frame);
+    # after 15 still frames the still rule makes him OCCLUDED, and that occlusion must not
+    # walk on at his old speed (occ5-t22 of bench.track_learned's thermal windows)
+    scene = Scene(velocity=(4.0, 0.0), start=(40.0, 90.0, 24.0, 60.0), occluder_x=(136, 220))
+    tracker = SvmTracker(TrackerConfig(kind="svm", seed=seed))
     tracker.init(scene.frame(0), scene.truth(0))
-    results = [tracker.update(scene.frame(t)) for t in range(1, 22)]
-    assert results[14].state is TrackState.TRACKING and results[14].velocity[0] > 6.0
-    hidden = results[16:]
-    assert all(r.state is not TrackState.TRACKING for r in hidden)
-    assert all(r.velocity == (0.0, 0.0) and r.box == hidden[0].box for r in hidden)
-    assert tracker._velocity[0] > 6.0  # kept for the particles when he turns up again
+    results = [tracker.update(scene.frame(min(t, 20))) for t in range(1, 60)]
+    occluded = [r for r in results if r.state is TrackState.OCCLUDED]
+    assert len(occluded) >= 20
+    assert tracker._sure_velocity[0] > 2.0  # what a coast would have walked on at
+    assert all(iou(r.box, scene.truth(20)) > 0.5 and r.velocity == (0.0, 0.0) for r in occluded)
+
+
+def test_the_coast_takes_the_median_step_of_the_sure_boxes() -> None:
+    # a walker stepping 4 px a frame; the frame his front reaches an occluder the box
+    # stalls at P 0.92: an EMA of the steps would coast on at 2.8 px a frame
+    tracker = SvmTracker(TrackerConfig(kind="svm"))
+    tracker.init(Scene().frame(0), (100.0, 80.0, 24.0, 60.0))
+
+    def at(x: float) -> np.ndarray:
+        return np.array([x, 110.0, 24.0, 60.0])
+
+    for step in range(1, 7):
+        tracker._learn_coast(at(112.0 + 4 * step), 0.97, jumped=False)
+    tracker._learn_coast(at(136.3), 0.92, jumped=False)  # the stall
+    assert tracker._sure_velocity == pytest.approx([4.0, 0.0])
+    tracker._learn_coast(at(138.0), 0.6, jumped=False)  # unsure: no step
+    tracker._learn_coast(at(148.0), 0.95, jumped=False)  # two frames on
+    assert tracker._sure_velocity == pytest.approx([4.0, 0.0])
+    assert len(tracker._sure_steps) == 7 and tracker._sure_steps[-1] == pytest.approx([5.85, 0.0])
+    # a box the scan found is no step: the history starts again from it
+    tracker._learn_coast(at(300.0), 0.95, jumped=True)
+    assert len(tracker._sure_steps) == 0 and tracker._since_sure == 0
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -251,7 +305,9 @@ def test_the_scan_finds_the_walker_where_he_comes_out(seed: int) -> None:
     scene = Scene(velocity=(2.0, 0.0), start=(40.0, 90.0, 24.0, 60.0), occluder_x=(120, 180))
     ends = {}
     for scan_after in (3, 0):
-        config = TrackerConfig(kind="svm", seed=seed, svm={"scan_after": scan_after})
+        # (held, not coasted: the report shows where the search waits)
+        svm = {"scan_after": scan_after, "coast": False}
+        config = TrackerConfig(kind="svm", seed=seed, svm=svm)
         tracker = SvmTracker(config)
         tracker.init(scene.frame(0), scene.truth(0))
         results = [tracker.update(scene.frame(t)) for t in range(1, 110)]

@@ -364,6 +364,12 @@ class SvmConfig(StrictModel):
     # 2), which then failed (centred 0.32 against 1.00 without it; docs/tracking.md).
     learn_needs_motion: bool = True
     learn_needs_colour: bool = False
+    # Beyond the seed: while OCCLUDED the reported box walks on (a hidden walker walks on,
+    # as `color` and `rf` have it, and the dome follows) at the velocity of the frames the
+    # SVM is sure of (P >= coast_confidence: a walker sliding behind an occluder seems to
+    # slow down); the PF and the scan stay where the target went out of sight. false = held.
+    coast: bool = True
+    coast_confidence: float = Field(default=0.9, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:
