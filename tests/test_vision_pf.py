@@ -10,9 +10,11 @@ import pytest
 from ptzd.vision.config import MotionConfig, ResamplingConfig, TrackerConfig
 from ptzd.vision.particle_filter import (
     ParticleTracker,
+    SureSteps,
     effective_sample_size,
     ego_motion_matrix,
     weighted_resample,
+    zoom_homography,
 )
 from ptzd.vision.tracking import TrackResult, TrackState, make_tracker
 from tests.vision_helpers import Scene, iou
@@ -523,3 +525,39 @@ def test_a_look_alike_s_top_further_back_is_not_followed(seed: int, max_step_y: 
         # without the step limit the box goes up onto his shirt and waits there for good
         assert sum(on_the_other) >= 20
         assert states[-1] is TrackState.OCCLUDED
+
+
+def test_sure_steps_take_the_median_step_of_the_sure_centres() -> None:
+    # a walker stepping 4 px a frame; the frame his front reaches an occluder the box
+    # stalls while the tracker is sure of it: an EMA of the steps would coast on at 2.8
+    sure = SureSteps(count=7)
+    sure.restart(np.array([112.0, 110.0]))
+    for step in range(1, 7):
+        sure.update(np.array([112.0 + 4 * step, 110.0]), sure=True)
+    sure.update(np.array([136.3, 110.0]), sure=True)  # the stall
+    assert sure.velocity == pytest.approx([4.0, 0.0])
+    sure.update(np.array([138.0, 110.0]), sure=False)  # not sure: no step
+    sure.update(np.array([148.0, 110.0]), sure=True)  # two frames on: 5.85 a frame
+    assert sure.velocity == pytest.approx([4.0, 0.0])
+    for x in (159.7, 171.4, 183.1, 194.8):  # he runs: four of the seven at 11.7 now
+        sure.update(np.array([x, 110.0]), sure=True)
+    assert sure.velocity == pytest.approx([11.7, 0.0])
+    # a jump is no step: the history starts again (keeping the velocity, if asked)
+    sure.restart(np.array([300.0, 110.0]), keep_velocity=True)
+    sure.update(np.array([302.0, 110.0]), sure=True)
+    assert sure.velocity == pytest.approx([2.0, 0.0])
+    sure.restart(np.array([0.0, 0.0]))
+    assert sure.velocity == pytest.approx([0.0, 0.0])
+
+
+def test_sure_steps_move_with_the_image() -> None:
+    sure = SureSteps()
+    sure.restart(np.array([100.0, 100.0]))
+    sure.update(np.array([104.0, 101.0]), sure=True)
+    pan = np.array([[1.0, 0.0, -10.0], [0.0, 1.0, 5.0], [0.0, 0.0, 1.0]])
+    sure.transform(pan)  # a pan shifts where he was, not how fast he walks
+    assert sure.velocity == pytest.approx([4.0, 1.0])
+    sure.update(np.array([98.0, 107.0]), sure=True)  # (104, 101) is (94, 106) now
+    assert sure.velocity == pytest.approx([4.0, 1.0])
+    sure.transform(zoom_homography(2.0, (320.0, 240.0)))  # zoomed in twice: twice the px
+    assert sure.velocity == pytest.approx([8.0, 2.0])

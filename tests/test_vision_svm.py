@@ -272,30 +272,8 @@ def test_a_walker_who_stops_is_not_coasted_away_from(seed: int) -> None:
     results = [tracker.update(scene.frame(min(t, 20))) for t in range(1, 60)]
     occluded = [r for r in results if r.state is TrackState.OCCLUDED]
     assert len(occluded) >= 20
-    assert tracker._sure_velocity[0] > 2.0  # what a coast would have walked on at
+    assert tracker._sure.velocity[0] > 2.0  # what a coast would have walked on at
     assert all(iou(r.box, scene.truth(20)) > 0.5 and r.velocity == (0.0, 0.0) for r in occluded)
-
-
-def test_the_coast_takes_the_median_step_of_the_sure_boxes() -> None:
-    # a walker stepping 4 px a frame; the frame his front reaches an occluder the box
-    # stalls at P 0.92: an EMA of the steps would coast on at 2.8 px a frame
-    tracker = SvmTracker(TrackerConfig(kind="svm"))
-    tracker.init(Scene().frame(0), (100.0, 80.0, 24.0, 60.0))
-
-    def at(x: float) -> np.ndarray:
-        return np.array([x, 110.0, 24.0, 60.0])
-
-    for step in range(1, 7):
-        tracker._learn_coast(at(112.0 + 4 * step), 0.97, jumped=False)
-    tracker._learn_coast(at(136.3), 0.92, jumped=False)  # the stall
-    assert tracker._sure_velocity == pytest.approx([4.0, 0.0])
-    tracker._learn_coast(at(138.0), 0.6, jumped=False)  # unsure: no step
-    tracker._learn_coast(at(148.0), 0.95, jumped=False)  # two frames on
-    assert tracker._sure_velocity == pytest.approx([4.0, 0.0])
-    assert len(tracker._sure_steps) == 7 and tracker._sure_steps[-1] == pytest.approx([5.85, 0.0])
-    # a box the scan found is no step: the history starts again from it
-    tracker._learn_coast(at(300.0), 0.95, jumped=True)
-    assert len(tracker._sure_steps) == 0 and tracker._since_sure == 0
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -83,6 +83,50 @@ def apply_homography(
     return out, mapped[5] - centre
 
 
+class SureSteps:
+    """The velocity a target had while the tracker was sure of it: the median of the last
+    `count` steps between sure centres, each per frame over the frames between them.
+
+    What `svm`'s box coasts at once the target is hidden. An EMA of the steps of
+    every fairly sure frame coasts too slowly: a walker sliding behind an occluder seems
+    to slow down, and the box stalls on the frame his front reaches it while the tracker
+    is still sure of it (docs/tracking.md, "The coast")."""
+
+    def __init__(self, count: int = 7) -> None:
+        self._steps: deque[FloatArray] = deque(maxlen=count)
+        self._last: FloatArray = np.zeros(2)
+        self._since = 0
+        self.velocity: FloatArray = np.zeros(2)
+
+    def __len__(self) -> int:
+        return len(self._steps)
+
+    def restart(self, centre: FloatArray, *, keep_velocity: bool = False) -> None:
+        """A new history from `centre` (init, or a jump that is no step)."""
+        self._steps.clear()
+        self._last, self._since = np.array(centre[:2], float), 0
+        if not keep_velocity:
+            self.velocity = np.zeros(2)
+
+    def update(self, centre: FloatArray, sure: bool) -> None:
+        """One frame: `centre` is taken if the tracker is `sure` of it."""
+        self._since += 1
+        if not sure:
+            return
+        self._steps.append((centre[:2] - self._last) / self._since)
+        self.velocity = np.median(np.array(self._steps), axis=0)
+        self._last, self._since = np.array(centre[:2], float), 0
+
+    def transform(self, homography: FloatArray) -> None:
+        """The camera moved (ego-motion, zoom): the history moves with the image."""
+        n = len(self._steps)
+        at = np.tile(np.array([*self._last, 1.0, 1.0]), (n + 2, 1))
+        vel = np.vstack([np.zeros((1, 2)), self.velocity[None], *(s[None] for s in self._steps)])
+        boxes, moved = apply_homography(homography, at, vel)
+        self._last, self.velocity = boxes[0, :2], moved[1]
+        self._steps = deque(moved[2:], maxlen=self._steps.maxlen)
+
+
 def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
     """A 3x3 homography from a shift (dx, dy) or a 3x3 matrix; ValueError otherwise."""
     m = np.asarray(ego_motion, dtype=np.float64)

@@ -37,6 +37,7 @@ from ptzd.vision.learning import LearningGate
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import (
     VELOCITY_SMOOTHING,
+    SureSteps,
     apply_homography,
     ego_motion_matrix,
     zoom_homography,
@@ -48,8 +49,6 @@ from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 _MIN_SIZE = 4.0
 # LK template = the box grown by this factor (context around the target; ours).
 _LK_MARGIN = 1.3
-# The coast's velocity: the median of this many last steps between sure boxes (ours).
-_COAST_STEPS = 7
 
 
 class Mode(StrEnum):
@@ -248,12 +247,7 @@ class SvmTracker:
         self._box: FloatArray = np.zeros(4)
         self._reference: FloatArray = np.ones(2)  # init (w, h), rescaled on zoom
         self._velocity: FloatArray = np.zeros(2)
-        # the coast (`SvmConfig.coast`): the velocity of the frames the SVM is sure of, the
-        # last such box and the frames since it
-        self._sure_velocity: FloatArray = np.zeros(2)
-        self._sure_box: FloatArray = np.zeros(4)
-        self._since_sure = 0
-        self._sure_steps: deque[FloatArray] = deque(maxlen=_COAST_STEPS)
+        self._sure = SureSteps()  # the coast's velocity (`SvmConfig.coast`)
         self._coasting = False  # this occlusion's report walks on
         self._particles: FloatArray = np.zeros((config.svm.num_particles, 4))
         self.positives: deque[FloatArray] = deque(maxlen=config.svm.positives)
@@ -294,10 +288,7 @@ class SvmTracker:
         self.lk.set_template(to_grey(frame), self._box)
         self.mode = Mode.LK
         self._velocity = np.zeros(2)
-        self._sure_velocity = np.zeros(2)
-        self._sure_box = self._box.copy()
-        self._since_sure = 0
-        self._sure_steps.clear()
+        self._sure.restart(self._box)
         self._state = TrackState.TRACKING
         self._confidence = 1.0
         self._occluded = 0
@@ -381,7 +372,10 @@ class SvmTracker:
                     self.mode = Mode.PF  # so step 7 below restarts LK from the found box
                     self._still.reset()
         self._confidence = confidence
-        self._learn_coast(box, confidence, jumped)
+        if jumped:  # the scan's find starts a new history: the jump is no step
+            self._sure.restart(box, keep_velocity=True)
+        else:
+            self._sure.update(box, confidence >= cfg.coast_confidence)
         if confidence > cfg.confidence and not jumped:
             # the velocity learns only from confident frames: a box the SVM doubts (on
             # a look-alike, or lagging the walker) must not steer the particles
@@ -416,19 +410,6 @@ class SvmTracker:
                 if self.new_positives >= cfg.retrain_after:
                     self._retrain(bgr)
         return self._result()
-
-    def _learn_coast(self, box: FloatArray, confidence: float, jumped: bool) -> None:
-        """The coast's velocity: the median step between the last boxes the SVM is sure of."""
-        self._since_sure += 1
-        if jumped:  # the scan's find starts a new history: the jump is no step
-            self._sure_box, self._since_sure = box.copy(), 0
-            self._sure_steps.clear()
-        elif confidence >= self._svm_config.coast_confidence:
-            self._sure_steps.append((box[:2] - self._sure_box[:2]) / self._since_sure)
-            # the median step: the frame a walker's front reaches an occluder the box
-            # stalls while the SVM is still sure of it
-            self._sure_velocity = np.median(np.array(self._sure_steps), axis=0)
-            self._sure_box, self._since_sure = box.copy(), 0
 
     def _scan(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
         """The best box of a grid around the held box, if the SVM is confident of it."""
@@ -516,8 +497,7 @@ class SvmTracker:
         box, vel = apply_homography(homography, self._box[None], self._velocity[None])
         old_size = self._box[2:].copy()
         self._box, self._velocity = box[0], vel[0]
-        sure, sure_v = apply_homography(homography, self._sure_box[None], self._sure_velocity[None])
-        self._sure_box, self._sure_velocity = sure[0], sure_v[0]
+        self._sure.transform(homography)
         self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
         self.lk.warp = homography @ self.lk.warp
         if self._candidate is not None:  # the last scan's find moves with the image too
@@ -528,7 +508,7 @@ class SvmTracker:
         vx, vy = (float(v) for v in self._velocity)
         if self._state is TrackState.OCCLUDED and self._coasting:
             # the search stays where the target went out of sight; the report walks on
-            vx, vy = (float(v) for v in self._sure_velocity)
+            vx, vy = (float(v) for v in self._sure.velocity)
             cx, cy = cx + self._occluded * vx, cy + self._occluded * vy
         elif self._state is not TrackState.TRACKING:
             vx, vy = 0.0, 0.0  # the box is held: so is what it reports moving
