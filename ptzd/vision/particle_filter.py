@@ -98,9 +98,6 @@ class SureSteps:
         self._since = 0
         self.velocity: FloatArray = np.zeros(2)
 
-    def __len__(self) -> int:
-        return len(self._steps)
-
     def restart(self, centre: FloatArray, *, keep_velocity: bool = False) -> None:
         """A new history from `centre` (init, or a jump that is no step)."""
         self._steps.clear()
