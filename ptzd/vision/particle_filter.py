@@ -116,12 +116,11 @@ class SureSteps:
 
     def transform(self, homography: FloatArray) -> None:
         """The camera moved (ego-motion, zoom): the history moves with the image."""
-        n = len(self._steps)
-        at = np.tile(np.array([*self._last, 1.0, 1.0]), (n + 2, 1))
-        vel = np.vstack([np.zeros((1, 2)), self.velocity[None], *(s[None] for s in self._steps)])
-        boxes, moved = apply_homography(homography, at, vel)
-        self._last, self.velocity = boxes[0, :2], moved[1]
-        self._steps = deque(moved[2:], maxlen=self._steps.maxlen)
+        vectors = np.vstack([self.velocity, *self._steps])  # all taken at the last centre
+        at = np.tile(np.array([*self._last, 1.0, 1.0]), (len(vectors), 1))
+        centres, moved = apply_homography(homography, at, vectors)
+        self._last, self.velocity = centres[0, :2], moved[0]
+        self._steps = deque(moved[1:], maxlen=self._steps.maxlen)
 
 
 def ego_motion_matrix(ego_motion: NDArray[np.float64]) -> FloatArray:
