@@ -250,6 +250,32 @@ def test_a_target_walking_on_behind_an_occluder_is_found_only_when_coasting(coas
         assert np.mean(late) < 0.1  # the seed's search stays where the target vanished
 
 
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (-5.0, 1.0)])
+def test_a_hidden_walker_is_coasted_at_his_speed_until_lost_then_held(
+    shift: tuple[float, float],
+) -> None:
+    # he walks 8 px a frame and vanishes after frame 15 (the truth walks on); with the
+    # camera panning too, the coast must move with the image as well as with him
+    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15, shift=shift)
+    ego = np.array(shift) if shift != (0.0, 0.0) else None
+    tracker = RfTracker(TrackerConfig(kind="rf", rf=RfConfig(max_occluded=10)))
+    tracker.init(_grey_scene(scene, 0), scene.truth(0))
+    results = [tracker.update(_grey_scene(scene, t), ego) for t in range(1, 36)]
+    assert results[14].state is TrackState.TRACKING
+    hidden = {t: results[t - 1] for t in range(16, 25)}
+    assert all(r.state is TrackState.OCCLUDED for r in hidden.values())
+    # occluded: the box walks on with him at his whole speed (0.95 a frame fell 19 px behind)
+    for t, r in hidden.items():
+        (x, _, w, _), (tx, _, tw, _) = r.box, scene.truth(t)
+        assert abs(x + w / 2 - (tx + tw / 2)) < 0.3 * tw, t
+        assert r.velocity[0] == pytest.approx(8.0, abs=1.0)
+    # terminated: the box holds where the coast ended (moving with the image only)
+    assert results[24].state is TrackState.LOST  # after 10 frames, as configured
+    lost = results[25:]
+    assert all(r.state is TrackState.LOST and r.velocity == (0.0, 0.0) for r in lost)
+    assert lost[-1].box[0] - lost[0].box[0] == pytest.approx(shift[0] * (len(lost) - 1), abs=0.5)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_box_follows_a_walker_going_away_only_with_the_scale_noise(seed: int) -> None:
     # 1.2 % smaller a frame for 39 frames (0.62 x): the seed's +-0.64 px on w and h cannot

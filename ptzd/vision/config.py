@@ -250,12 +250,13 @@ class RfConfig(StrictModel):
     negative_reach: float = Field(default=2.0, gt=0.6, le=10.0)
     # False: learn once on the first frame only (the static-RF ablation of seed sec. 5.4).
     online: bool = True
-    # Beyond the seed: while occluded or lost the box coasts on at its velocity (kept this
-    # much per frame) and the particles search around it, their spread growing by
-    # search_growth x sigma_xy per frame up to max_search_sigma x sigma_xy. False: the
-    # seed's "previous particles and box" (the search never leaves where the target was).
+    # Beyond the seed: while occluded the box coasts on at the median step of the last
+    # learning frames (kept coast_decay a frame; 2026-12-06: 1, it was 0.95 of an EMA) and
+    # holds once the track is terminated; the particles search around it, their spread
+    # growing by search_growth x sigma_xy per frame up to max_search_sigma x sigma_xy.
+    # False: the seed's "previous particles and box" (the search stays where he was).
     coast: bool = True
-    coast_decay: float = Field(default=0.95, ge=0.0, le=1.0)
+    coast_decay: float = Field(default=1.0, ge=0.0, le=1.0)
     search_growth: float = Field(default=0.5, ge=0.0, le=10.0)
     max_search_sigma: float = Field(default=8.0, ge=1.0, le=100.0)
     # Beyond the seed (2026-12-04): motion evidence (`tracker.stillness`'s motion map, the

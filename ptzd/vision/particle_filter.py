@@ -87,7 +87,7 @@ class SureSteps:
     """The velocity a target had while the tracker was sure of it: the median of the last
     `count` steps between sure centres, each per frame over the frames between them.
 
-    What `svm`'s box coasts at once the target is hidden. An EMA of the steps of
+    What `svm`'s and `rf`'s boxes coast at once the target is hidden. An EMA of the steps of
     every fairly sure frame coasts too slowly: a walker sliding behind an occluder seems
     to slow down, and the box stalls on the frame his front reaches it while the tracker
     is still sure of it (docs/tracking.md, "The coast")."""

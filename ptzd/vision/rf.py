@@ -53,6 +53,7 @@ from ptzd.vision.learning import LearningGate
 from ptzd.vision.likelihood import FloatArray, Frame
 from ptzd.vision.particle_filter import (
     VELOCITY_SMOOTHING,
+    SureSteps,
     apply_homography,
     ar2_drift,
     ego_motion_matrix,
@@ -229,6 +230,7 @@ class RfTracker:
         self._box: FloatArray = np.zeros(4)
         self._centres: deque[FloatArray] = deque(maxlen=3)
         self._velocity: FloatArray = np.zeros(2)
+        self._sure = SureSteps()  # the steps of the learning frames: what the coast walks at
         self._state = TrackState.LOST
         self._confidence = 0.0
         self.occluded_frames = 0  # OC of the seed
@@ -270,6 +272,7 @@ class RfTracker:
         self._centres.clear()
         self._centres.append(self._box[:2].copy())
         self._velocity = np.zeros(2)
+        self._sure.restart(self._box)
         self._particles = np.tile(self._box, (rf.num_particles, 1))
         self._frame_index = 0
         self.learned_frames = 0
@@ -319,6 +322,7 @@ class RfTracker:
             branch = Branch.FULL_OCCLUSION  # on something that does not move: not the target
         self.branch = branch
         self._confidence = p_t
+        self._sure.update(estimate, sure=branch is Branch.LEARN)
         if branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION:
             self._move_to(estimate, learn_velocity=branch is Branch.LEARN)
             # sec. 4.3: the memory grows with every tracked frame until it is full
@@ -386,6 +390,7 @@ class RfTracker:
         self._particles, _ = apply_homography(homography, self._particles, zeros)
         box, vel = apply_homography(homography, self._box[None], self._velocity[None])
         self._box, self._velocity = box[0], vel[0]
+        self._sure.transform(homography)
         if self._centres:
             pts = np.array(self._centres)
             mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
@@ -457,9 +462,16 @@ class RfTracker:
         return rf.sigma_xy * min(1.0 + rf.search_growth * self.occluded_frames, rf.max_search_sigma)
 
     def _coast(self) -> None:
-        """Not tracked this frame: the box walks on at its (decaying) velocity; the velocity
-        history follows it, so the drift resumes from there once the target is found."""
-        self._velocity = self._velocity * self._rf_config.coast_decay
+        """Not tracked this frame: the box walks on at the median step of the last learning
+        frames (`SureSteps`), kept `coast_decay` a frame, and holds once the track is
+        terminated (LOST). The velocity history follows the box, so the drift resumes from
+        there once the target is found."""
+        rf = self._rf_config
+        if self.occluded_frames == 1:
+            self._velocity = self._sure.velocity.copy()
+        if self.occluded_frames > rf.max_occluded:
+            self._velocity = np.zeros(2)
+        self._velocity = self._velocity * rf.coast_decay
         self._box[:2] = self._box[:2] + self._velocity
         self._centres.append(self._box[:2].copy())
 
