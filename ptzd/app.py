@@ -57,6 +57,7 @@ from ptzd.sdnotify import Heartbeats, Notifier, Watchdog
 from ptzd.sim.camera_model import Pose
 from ptzd.vision.acquisition import AcqState, Acquirer, Decision, Transition
 from ptzd.vision.acquisition import TrackResult as AcqTrack
+from ptzd.vision.auto import running_kind
 from ptzd.vision.detect.types import Detector
 from ptzd.vision.particle_filter import apply_homography
 from ptzd.vision.tracking import Tracker, TrackResult, TrackState, centre_box
@@ -109,6 +110,7 @@ class TrackItem:
     # the transitions made on this frame
     state: str | None = None
     transitions: tuple[Transition, ...] = ()
+    tracker: str | None = None  # the likelihood that made `result` (`auto`: day or night)
 
     @property
     def published_state(self) -> str:
@@ -435,7 +437,7 @@ class Daemon:
                         decision = self.acquirer.select(frame.capture_time, box)
                     result: TrackResult | None = TrackResult(box, TrackState.TRACKING, 1.0, (0, 0))
                     self._publish(_track_item(result, frame, pose, (0.0, 0.0), box, generation,
-                                              decision))  # fmt: skip
+                                              decision, self._kind_of(tracker)))  # fmt: skip
                     previous = (frame, pose)
                     continue
                 if not auto and (tracker is None or previous is None):
@@ -468,12 +470,16 @@ class Daemon:
                     dt = frame.capture_time - previous[0].capture_time
                     vx, vy = result.velocity
                     velocity = (vx / dt, vy / dt) if dt > 0 else (0.0, 0.0)
+                kind = self._kind_of(tracker)
                 self._publish(
-                    _track_item(result, frame, pose, velocity, acquired, generation, decision)
+                    _track_item(result, frame, pose, velocity, acquired, generation, decision, kind)
                 )
                 previous = (frame, pose)
         finally:
             self.tracks.close()
+
+    def _kind_of(self, tracker: Tracker | None) -> str | None:
+        return running_kind(tracker, self.config.tracker.kind)
 
     def _drawn_box_now(
         self, box: BoxTuple, drawn_at: float | None, frame: FrameItem, pose: Pose
@@ -572,6 +578,7 @@ class Daemon:
                 confidence=None if r is None else r.confidence,
                 velocity=None if r is None else item.velocity,
                 transitions=tuple(t.to_dict() for t in item.transitions),
+                tracker=None if r is None else item.tracker,
             )
         )
 
@@ -818,11 +825,13 @@ def _track_item(
     acquired: BoxTuple | None,
     generation: int,
     decision: Decision | None,
+    tracker: str | None,
 ) -> TrackItem:
     if decision is None:
-        return TrackItem(result, frame, pose, velocity, acquired, generation)
+        return TrackItem(result, frame, pose, velocity, acquired, generation, tracker=tracker)
     return TrackItem(result, frame, pose, velocity, acquired, generation,
-                     state=str(decision.state), transitions=decision.transitions)  # fmt: skip
+                     state=str(decision.state), transitions=decision.transitions,
+                     tracker=tracker)  # fmt: skip
 
 
 def _track_input(item: TrackItem | None) -> TrackInput | None:

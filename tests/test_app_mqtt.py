@@ -109,6 +109,7 @@ async def test_track_velocity_zoom_layer_ptz_state_and_autotrack_off(tmp_path: P
                 # makes it differ from 80, the sign and order of magnitude do not)
                 assert max(t["velocity"][0] for t in moving) > 30.0
                 assert all(t["id"] == 0 and t["frame_size"] == [320, 240] for t in tracks)
+                assert {t["tracker"] for t in moving} == {"color"}  # `auto` on colour frames
                 async with subscriber(broker.port, "ptzd/cam1/zoom_layer") as late:
                     layer = await late.wait_for("ptzd/cam1/zoom_layer")
                 assert layer.retain and layer.payload == b"0"

@@ -107,6 +107,27 @@ async def test_virtual_closed_loop_keeps_the_walker_centred_and_is_deterministic
 
 
 @pytest.mark.slow
+async def test_the_track_says_which_tracker_made_it_across_dusk(tmp_path: Path) -> None:
+    # `auto`: color on the colour frames, rf once the simulated dome turns monochrome
+    report = await run_closed_loop(
+        ClosedLoopOptions(
+            config=validate_config({"sim": {"night_after_s": 1.5}}, environ={}),
+            spec="synthetic:0",
+            duration=3.0,
+            record=tmp_path,
+            virtual=True,
+        )
+    )
+    lines = (tmp_path / "track.jsonl").read_text().splitlines()
+    tracking = [r for r in map(json.loads, lines) if r["state"] == "tracking"]
+    kinds = [r["tracker"] for r in tracking]
+    switch = kinds.index("rf")
+    assert switch > 5 and set(kinds[:switch]) == {"color"} and set(kinds[switch:]) == {"rf"}
+    assert tracking[switch - 1]["t"] < 1.5 <= tracking[switch]["t"]  # at dusk
+    assert report["centred_fraction"] is not None
+
+
+@pytest.mark.slow
 async def test_closed_loop_as_a_dome_that_reports_no_pose(tmp_path: Path) -> None:
     """`[sim] report_pose = false`: the daemon dead-reckons the pose from its own commands,
     as with a real Pelco-P dome, and still keeps the walker centred."""

@@ -145,7 +145,8 @@ async def test_track_payload_and_rate_coalescing(broker: Broker) -> None:
         assert all(not m.retain and m.qos == 0 for m in got)
         body = json.loads(got[-1].payload)
         assert set(body) == {
-            "ts", "state", "id", "bbox", "bbox_norm", "confidence", "velocity", "frame_size"
+            "ts", "state", "id", "bbox", "bbox_norm", "confidence", "velocity", "frame_size",
+            "tracker",
         }  # fmt: skip
         assert body["state"] == "tracking"
         assert body["bbox"] == [100.0 + sent - 1, 50.0, 64.0, 128.0]

@@ -171,7 +171,10 @@ def test_track_payload_shape_and_normalisation() -> None:
         "confidence": 0.457,
         "velocity": [1.0, 2.0],
         "frame_size": [800, 600],
+        "tracker": None,
     }
+    night = TrackMessage(ts=0, state="tracking", frame_size=(640, 480), tracker="rf")
+    assert json.loads(night.to_payload())["tracker"] == "rf"
     searching = json.loads(
         TrackMessage(ts=0, state=TrackState.SEARCHING, frame_size=(640, 480)).to_payload()
     )

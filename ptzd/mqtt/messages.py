@@ -95,6 +95,9 @@ class TrackMessage:
     # acquisition state changes since the previous message (`Transition.to_dict()`):
     # {"t", "from", "state", "reason", "bbox"}; the key is left out when there are none
     transitions: tuple[dict[str, Any], ...] = ()
+    # the likelihood that made `bbox` (`color`, `rf`, `svm`; with `auto`, the day or the
+    # night one running now), or None
+    tracker: str | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -125,6 +128,7 @@ class TrackMessage:
             "confidence": None if self.confidence is None else round(self.confidence, 3),
             "velocity": rounded(self.velocity, 1),
             "frame_size": list(self.frame_size),
+            "tracker": self.tracker,
         }
         if self.transitions:
             body["transitions"] = list(self.transitions)

@@ -158,3 +158,13 @@ class AutoTracker:
         if self._kind is None:
             return False
         return self._trackers[self._kind].resembles(frame, box)
+
+
+def running_kind(tracker: Tracker | None, configured: str) -> str | None:
+    """The likelihood `tracker` runs now: `auto`'s day or night one, else the `configured`
+    kind (None without a tracker)."""
+    if tracker is None:
+        return None
+    if isinstance(tracker, AutoTracker):
+        return tracker.kind
+    return configured
