@@ -32,7 +32,8 @@ Faults, each with its expected recovery (checked, see docs/reliability.md):
   `ptzd.sim.cli.DUSK_SIGNAL`) for 15 s, then back (`DAWN_SIGNAL`); an operator selects a
   walker after each. Expect the daemon's tracker (`[tracker] kind = "auto"`) to switch to
   its night kind within 15 s of dusk (at once for a tracked target, else at the next lock)
-  and back to its day kind within 15 s of dawn, and frames to keep coming.
+  and back to its day kind within 15 s of dawn, both in its log (`tracker_switched`) and in
+  the `tracker` field of its MQTT `track` messages, and frames to keep coming.
 """
 
 from __future__ import annotations
@@ -309,7 +310,8 @@ class SerialProxy:
 
 
 class MqttWatcher:
-    """Counts every message under the camera's topics; notes when `online` is (re)published."""
+    """Counts every message under the camera's topics; notes when `online` is (re)published
+    and when the `track` messages start naming another tracker."""
 
     def __init__(self, port: int, now: Callable[[], float]) -> None:
         self.port = port
@@ -317,6 +319,7 @@ class MqttWatcher:
         self.messages = 0
         self.online_times: list[float] = []
         self.connects = 0
+        self.tracker_changes: list[tuple[float, str]] = []  # (time, the tracker named from then)
 
     async def run(self) -> None:
         import aiomqtt
@@ -331,8 +334,23 @@ class MqttWatcher:
                         topic = str(message.topic)
                         if topic.endswith("/availability") and message.payload == b"online":
                             self.online_times.append(self.now())
+                        elif topic.endswith("/track"):
+                            self._note_tracker(message.payload)
             except aiomqtt.MqttError:
                 await asyncio.sleep(0.5)
+
+    def _note_tracker(self, payload: object) -> None:
+        if not isinstance(payload, bytes | bytearray):
+            return
+        with contextlib.suppress(ValueError, AttributeError):
+            kind = json.loads(payload).get("tracker")
+            known = self.tracker_changes[-1][1] if self.tracker_changes else None
+            if isinstance(kind, str) and kind != known:
+                self.tracker_changes.append((self.now(), kind))
+
+    def named_after(self, since: float, kind: str) -> float | None:
+        """When the `track` messages went over to naming `kind` after `since`, or None."""
+        return next((t for t, k in self.tracker_changes if t > since and k == kind), None)
 
 
 class NotifySocket:
@@ -878,7 +896,7 @@ class Soak:
                 "recovery_s": round(watcher.online_times[-1] - end, 2) if recovered else None,
             }
         elif name == "day-night":
-            entry |= await self._day_night(sim, broker, notify, truth)
+            entry |= await self._day_night(sim, broker, notify, watcher, truth)
         self.fault_log.append(entry)
 
     async def _day_night(
@@ -886,14 +904,18 @@ class Soak:
         sim: asyncio.subprocess.Process,
         broker: Mosquitto,
         notify: NotifySocket,
+        watcher: MqttWatcher,
         truth: GroundTruth,
     ) -> dict[str, Any]:
+        """Dusk, then dawn: the daemon's log says its tracker switched, and so do the MQTT
+        `track` messages (their `tracker` field), as a site's integration sees it."""
         from ptzd.sim.cli import DAWN_SIGNAL, DUSK_SIGNAL
         from ptzd.vision.config import AutoConfig
 
         kinds = AutoConfig()  # the soak's daemon runs the default tracker: auto
         log = self.dir / "daemon.log"
         switches: dict[str, float | None] = {}
+        on_mqtt: dict[str, float | None] = {}
         frames_before = notify.frames
         for phase, sig, kind in (("night", DUSK_SIGNAL, kinds.night),
                                  ("day", DAWN_SIGNAL, kinds.day)):  # fmt: skip
@@ -902,17 +924,29 @@ class Soak:
             sim.send_signal(sig)
             await self._select(broker.port, truth)  # someone to lock on in the new light
             switched_now = functools.partial(_switched_to, log, offset, kind)
-            await self._wait_for(switched_now, NIGHT_S)
+            named = functools.partial(watcher.named_after, began, kind)
+
+            def both(log_says: Callable[[], bool] = switched_now, since: float = began,
+                     wanted: str = kind) -> bool:  # fmt: skip
+                return log_says() and watcher.named_after(since, wanted) is not None
+
+            await self._wait_for(both, NIGHT_S)
             switched = switched_now()
             switches[phase] = round(self.now() - began, 2) if switched else None
+            seen = named()
+            on_mqtt[phase] = None if seen is None else round(seen - began, 2)
             await asyncio.sleep(max(0.0, began + NIGHT_S - self.now()))
         return {
             "ended_s": round(self.now(), 2),
             "expected": f"switch to {kinds.night} within {NIGHT_S:g} s of dusk and to "
-            f"{kinds.day} within {NIGHT_S:g} s of dawn; frames keep coming",
+            f"{kinds.day} within {NIGHT_S:g} s of dawn, in the log and in MQTT's track "
+            "messages; frames keep coming",
             "night_switch_s": switches["night"],
             "day_switch_s": switches["day"],
-            "recovered": None not in switches.values() and notify.frames > frames_before,
+            "night_on_mqtt_s": on_mqtt["night"],
+            "day_on_mqtt_s": on_mqtt["day"],
+            "recovered": None not in (*switches.values(), *on_mqtt.values())
+            and notify.frames > frames_before,
             "recovery_s": switches["day"],
         }
 

@@ -25,6 +25,7 @@ from ptzd.errors import UsageError
 from ptzd.sim.groundtruth import GroundTruth
 from ptzd.soak import (
     FAULTS,
+    MqttWatcher,
     SoakOptions,
     _probe_loop,
     dome_still,
@@ -147,6 +148,22 @@ def test_virtual_clock_soak_probes_the_sim_process(tmp_path: Path) -> None:
     assert counted and min(counted) >= 1
 
 
+def test_the_watcher_notes_when_the_track_messages_name_another_tracker() -> None:
+    now = [0.0]
+    watcher = MqttWatcher(0, lambda: now[0])
+    for now[0], payload in enumerate(
+        (b'{"state":"searching","tracker":null}', b'{"state":"tracking","tracker":"color"}',
+         b'{"tracker":"color"}', b"garbage{", b"[1]", b'{"tracker":"rf"}', b'{"tracker":"rf"}',
+         b'{"tracker":"color"}'),
+    ):  # fmt: skip
+        watcher._note_tracker(payload)
+    # a change is noted when it comes; nulls, repeats and bad payloads are not changes
+    assert watcher.tracker_changes == [(1, "color"), (5, "rf"), (7, "color")]
+    assert watcher.named_after(2.0, "rf") == 5
+    assert watcher.named_after(5.0, "rf") is None  # only what came after
+    assert watcher.named_after(0.0, "color") == 1 and watcher.named_after(4.0, "color") == 7
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(200)
 def test_ci_soak_with_every_fault(tmp_path: Path) -> None:
@@ -165,6 +182,7 @@ def test_ci_soak_with_every_fault(tmp_path: Path) -> None:
     assert all(f["recovered"] for f in report["faults"])
     night = next(f for f in report["faults"] if f["fault"] == "day-night")
     assert night["night_switch_s"] <= 15 and night["day_switch_s"] <= 15
+    assert night["night_on_mqtt_s"] <= 15 and night["day_on_mqtt_s"] <= 15  # seen by the site
     # the leak checks start after the first night (the night tracker's one-time memory)
     assert report["summary"]["leak_checks_from_s"] >= night["ended_s"]
     summary = report["summary"]
