@@ -926,9 +926,9 @@ class Soak:
             switched_now = functools.partial(_switched_to, log, offset, kind)
             named = functools.partial(watcher.named_after, began, kind)
 
-            def both(log_says: Callable[[], bool] = switched_now, since: float = began,
-                     wanted: str = kind) -> bool:  # fmt: skip
-                return log_says() and watcher.named_after(since, wanted) is not None
+            def both(log_says: Callable[[], bool] = switched_now,
+                     mqtt_says: Callable[[], float | None] = named) -> bool:  # fmt: skip
+                return log_says() and mqtt_says() is not None
 
             await self._wait_for(both, NIGHT_S)
             switched = switched_now()
