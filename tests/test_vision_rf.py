@@ -30,7 +30,7 @@ from ptzd.vision.rf import (
     sample_negatives,
 )
 from ptzd.vision.tracking import TrackState, make_tracker
-from tests.vision_helpers import Scene, iou, synthetic_window
+from tests.vision_helpers import Scene, iou, synthetic_window, vanishing_walker
 
 PATCH = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
 
@@ -254,10 +254,7 @@ def test_a_target_walking_on_behind_an_occluder_is_found_only_when_coasting(coas
 def test_a_hidden_walker_is_coasted_at_his_speed_until_lost_then_held(
     shift: tuple[float, float],
 ) -> None:
-    # he walks 8 px a frame and vanishes after frame 15 (the truth walks on); with the
-    # camera panning too, the coast must move with the image as well as with him
-    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15, shift=shift)
-    ego = np.array(shift) if shift != (0.0, 0.0) else None
+    scene, ego = vanishing_walker(shift)
     tracker = RfTracker(TrackerConfig(kind="rf", rf=RfConfig(max_occluded=10)))
     tracker.init(_grey_scene(scene, 0), scene.truth(0))
     results = [tracker.update(_grey_scene(scene, t), ego) for t in range(1, 36)]

@@ -23,7 +23,14 @@ from ptzd.vision.svm import (
     platt_probability,
 )
 from ptzd.vision.tracking import TrackState
-from tests.vision_helpers import Scene, draw_person, iou, synthetic_window, twin_outcomes
+from tests.vision_helpers import (
+    Scene,
+    draw_person,
+    iou,
+    synthetic_window,
+    twin_outcomes,
+    vanishing_walker,
+)
 
 REAL_VIDEO = Path(__file__).resolve().parents[1] / "data" / "vtest.avi"
 
@@ -236,10 +243,7 @@ def test_particles_drift_with_the_target(seed: int) -> None:
 def test_a_hidden_walker_is_coasted_and_the_drift_resumes_after(
     shift: tuple[float, float],
 ) -> None:
-    # he vanishes after frame 15 (the truth walks on); with the camera panning too, the
-    # coast must move with the image as well as with him
-    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15, shift=shift)
-    ego = np.array(shift) if shift != (0.0, 0.0) else None
+    scene, ego = vanishing_walker(shift)
     hidden = {}
     for coast in (True, False):
         tracker = SvmTracker(TrackerConfig(kind="svm", svm={"coast": coast}))

@@ -76,6 +76,14 @@ class Scene:
         return img
 
 
+def vanishing_walker(shift: tuple[float, float]) -> tuple[Scene, NDArray[np.float64] | None]:
+    """A walker stepping 8 px a frame who vanishes after frame 15 (the truth walks on), seen
+    by a camera panning `shift` px a frame; and the ego-motion to hand a tracker (None when
+    the camera is still). The coast must move with the image as well as with him."""
+    scene = Scene(velocity=(8.0, 0.0), start=(20.0, 90.0, 24.0, 60.0), vanish_after=15, shift=shift)
+    return scene, np.array(shift) if shift != (0.0, 0.0) else None
+
+
 def twin_scene(velocity: float, frames: int) -> tuple[Scene, list[Frame]]:
     """A walker leaving behind a still twin (a figure in his colours where he started)."""
     scene = Scene(velocity=(velocity, 0.0))
