@@ -110,7 +110,8 @@ class TrackItem:
     # the transitions made on this frame
     state: str | None = None
     transitions: tuple[Transition, ...] = ()
-    tracker: str | None = None  # the likelihood that made `result` (`auto`: day or night)
+    # the likelihood that made `result` (`auto`: day or night); None without a result
+    tracker: str | None = None
 
     @property
     def published_state(self) -> str:
@@ -578,7 +579,7 @@ class Daemon:
                 confidence=None if r is None else r.confidence,
                 velocity=None if r is None else item.velocity,
                 transitions=tuple(t.to_dict() for t in item.transitions),
-                tracker=None if r is None else item.tracker,
+                tracker=item.tracker,
             )
         )
 
@@ -827,6 +828,7 @@ def _track_item(
     decision: Decision | None,
     tracker: str | None,
 ) -> TrackItem:
+    tracker = None if result is None else tracker  # no box, no tracker that made it
     if decision is None:
         return TrackItem(result, frame, pose, velocity, acquired, generation, tracker=tracker)
     return TrackItem(result, frame, pose, velocity, acquired, generation,

@@ -267,7 +267,7 @@ class _Recorder:
             "box": None if r is None else [round(v, 2) for v in r.box],
             "state": item.published_state,
             "confidence": None if r is None else round(r.confidence, 4),
-            "tracker": None if r is None else item.tracker,
+            "tracker": item.tracker,
         }
         if item.transitions:
             record["transitions"] = [t.to_dict() for t in item.transitions]
