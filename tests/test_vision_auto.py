@@ -15,12 +15,12 @@ from ptzd.logs import configure_logging
 from ptzd.vision.auto import AutoTracker, colour_share
 from ptzd.vision.config import TrackerConfig
 from ptzd.vision.features import to_bgr, to_grey
-from ptzd.vision.tracking import TrackState, make_tracker
+from ptzd.vision.tracking import TrackState, make_bare_tracker, make_tracker
 from tests.vision_helpers import Frame, Scene, iou
 
 
 def _auto(**auto: object) -> AutoTracker:
-    tracker = make_tracker(TrackerConfig.model_validate({"kind": "auto", "auto": auto}))
+    tracker = make_bare_tracker(TrackerConfig.model_validate({"kind": "auto", "auto": auto}))
     assert isinstance(tracker, AutoTracker)
     return tracker
 

@@ -16,7 +16,7 @@ from ptzd.vision.particle_filter import (
     weighted_resample,
     zoom_homography,
 )
-from ptzd.vision.tracking import TrackResult, TrackState, make_tracker
+from ptzd.vision.tracking import TrackResult, TrackState, make_bare_tracker, make_tracker
 from tests.vision_helpers import Scene, iou
 
 
@@ -129,7 +129,7 @@ def test_ego_motion_homography_moves_and_scales_particles() -> None:
 
 def test_rescale_scales_the_box_about_the_centre() -> None:
     scene = Scene()
-    tracker = make_tracker(TrackerConfig(kind="color"))
+    tracker = make_bare_tracker(TrackerConfig(kind="color"))
     tracker.init(scene.frame(0), (100.0, 100.0, 20.0, 40.0))
     tracker.rescale(2.0, (110.0, 120.0))  # zoom in 2x about the box centre
     assert isinstance(tracker, ParticleTracker)
@@ -175,7 +175,7 @@ def test_reacquires_after_lost_when_the_target_reappears_beyond_the_coast() -> N
     # out 60-100 px from where the coasting box stopped, beyond the initial search radius
     scene = Scene(velocity=(3.0, 0.0), occluder_x=(100, 200))
     config = TrackerConfig(kind="color", occlusion={"max_frames": 10})
-    tracker = make_tracker(config)
+    tracker = make_bare_tracker(config)
     tracker.init(scene.frame(0), scene.truth(0))
     assert isinstance(tracker, ParticleTracker)
     results, models = [], []

@@ -29,7 +29,7 @@ from ptzd.vision.rf import (
     learning_bounds,
     sample_negatives,
 )
-from ptzd.vision.tracking import TrackState, make_tracker
+from ptzd.vision.tracking import TrackState, make_bare_tracker
 from tests.vision_helpers import Scene, iou, synthetic_window, vanishing_walker
 
 PATCH = np.array([[10, 20, 30], [40, 50, 60], [70, 80, 90]], np.uint8)
@@ -156,7 +156,7 @@ def _grey_scene(scene: Scene, t: int, black_hot: bool = False) -> np.ndarray:
 @pytest.mark.parametrize("black_hot", [False, True])
 def test_tracks_a_grey_target(black_hot: bool) -> None:
     scene = Scene()
-    tracker = make_tracker(TrackerConfig(kind="rf"))
+    tracker = make_bare_tracker(TrackerConfig(kind="rf"))
     tracker.init(_grey_scene(scene, 0, black_hot), scene.truth(0))
     scores = []
     for t in range(1, 30):
@@ -293,7 +293,9 @@ def test_the_box_follows_a_walker_going_away_only_with_the_scale_noise(seed: int
 
 
 def _rf(seed: int, **rf: object) -> RfTracker:
-    tracker = make_tracker(TrackerConfig.model_validate({"kind": "rf", "seed": seed, "rf": rf}))
+    tracker = make_bare_tracker(
+        TrackerConfig.model_validate({"kind": "rf", "seed": seed, "rf": rf})
+    )
     assert isinstance(tracker, RfTracker)
     return tracker
 

@@ -19,8 +19,16 @@ from numpy.typing import NDArray
 
 from ptzd.logs import get_logger
 from ptzd.vision.config import TrackerConfig, TrackerKind
+from ptzd.vision.first_box import FittedTracker
 from ptzd.vision.particle_filter import apply_homography, ego_motion_matrix, zoom_homography
-from ptzd.vision.tracking import Box, Tracker, TrackResult, TrackState, centre_box, make_tracker
+from ptzd.vision.tracking import (
+    Box,
+    Tracker,
+    TrackResult,
+    TrackState,
+    centre_box,
+    make_bare_tracker,
+)
 
 # Pixels whose brightest channel is under this carry no colour to speak of (sensor noise,
 # and in the simulator the black outside the wide video): they are left out.
@@ -72,7 +80,7 @@ class AutoTracker:
 
     def _tracker(self, kind: TrackerKind) -> Tracker:
         if kind not in self._trackers:
-            self._trackers[kind] = make_tracker(self._config.model_copy(update={"kind": kind}))
+            self._trackers[kind] = make_bare_tracker(self._config.model_copy(update={"kind": kind}))
         return self._trackers[kind]
 
     def _is_mono(self, frame: NDArray[np.uint8]) -> tuple[bool, float]:
@@ -165,6 +173,8 @@ def running_kind(tracker: Tracker | None, configured: str) -> str | None:
     kind (None without a tracker)."""
     if tracker is None:
         return None
+    if isinstance(tracker, FittedTracker):
+        tracker = tracker.tracker
     if isinstance(tracker, AutoTracker):
         return tracker.kind
     return configured

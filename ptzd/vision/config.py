@@ -437,6 +437,30 @@ class AutoConfig(StrictModel):
         return self
 
 
+class FirstBoxConfig(StrictModel):
+    """Beyond the seeds: a loose first box fitted to the moving person in it (ours;
+    ptzd/vision/first_box.py, docs/tracking.md "A loose first box").
+
+    The tracker starts on the box it is given. Over its first `frames` frames the pixels
+    that moved are gathered (the camera's own motion taken out, `[tracker.stillness]`'s
+    `diff_threshold`). Then the strips at each side of the box in which under
+    `strip_fraction` of the pixels are on the person (moved, or between two moved pixels
+    of their row or column) are trimmed, at most `max_trim` of the box from a side. The
+    tracker starts again on the trimmed box when its area is under `refit_below` of the
+    box's: a fifth of the box still ground, not the few still strips a tight box has where
+    a foot is planted. A box in which under `min_moving_fraction` moved (a person standing
+    still) is kept as it is. Boxes are answered in the framing they were drawn in.
+    """
+
+    enabled: bool = True
+    # Frames of motion gathered (2 = 0.2 s at 10 fps). 1..50
+    frames: int = Field(default=2, ge=1, le=50)
+    strip_fraction: float = Field(default=0.05, ge=0.0, le=1.0)
+    max_trim: float = Field(default=0.25, ge=0.0, lt=0.5)
+    min_moving_fraction: float = Field(default=0.02, ge=0.0, le=1.0)
+    refit_below: float = Field(default=0.8, ge=0.0, le=1.0)
+
+
 class TrackerConfig(StrictModel):
     """Which tracker runs and its particle-filter parameters."""
 
@@ -456,3 +480,4 @@ class TrackerConfig(StrictModel):
     rf: RfConfig = RfConfig()
     svm: SvmConfig = SvmConfig()
     auto: AutoConfig = AutoConfig()
+    first_box: FirstBoxConfig = FirstBoxConfig()

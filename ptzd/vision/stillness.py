@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from ptzd.vision.features import to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
@@ -96,6 +97,11 @@ class MotionMap:
         if not still:
             cv2.min(self._moving, self._valid, dst=self._moving)  # 1 where valid (255), else 0
         cv2.integral(self._moving, sum=self._integral, sdepth=cv2.CV_32S)
+
+    def moving(self) -> NDArray[np.uint8] | None:
+        """This frame's pixels: 1 moved, 0 did not; None when not known. The buffer is
+        overwritten by the next `update`: copy what must outlive it."""
+        return self._moving if self._known else None
 
     def moving_fraction(self, boxes: FloatArray) -> FloatArray | None:
         """Share of moving pixels in each centre-form box (M x 4); None when not known."""

@@ -76,7 +76,17 @@ class Tracker(Protocol):
 
 
 def make_tracker(config: TrackerConfig) -> Tracker:
-    """The tracker `config.kind` names."""
+    """The tracker `config.kind` names, its first box fitted to the person's motion when
+    `config.first_box` is enabled (ptzd/vision/first_box.py)."""
+    if config.first_box.enabled:
+        from ptzd.vision.first_box import FittedTracker
+
+        return FittedTracker(make_bare_tracker(config), config)
+    return make_bare_tracker(config)
+
+
+def make_bare_tracker(config: TrackerConfig) -> Tracker:
+    """The tracker `config.kind` names, following the first box as it is given."""
     from ptzd.vision.color import ColorLikelihood
     from ptzd.vision.particle_filter import ParticleTracker
 
