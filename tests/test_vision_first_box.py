@@ -195,6 +195,17 @@ def test_a_tight_first_box_is_left_to_the_tracker_as_drawn(cloth: type[Scene]) -
         assert (result.box, result.state) == (box, state)  # the same tracker, run for run
 
 
+def test_a_box_with_still_strips_at_a_side_only_is_not_refitted() -> None:
+    # drawn tight in height but with 12 px of ground to his right: still strips at a side
+    # are what a tight box has by a still arm or a planted leg, not a drawn margin
+    scene = TexturedScene(start=(60.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.5))
+    x, y, w, h = scene.truth(0)
+    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
+    assert isinstance(tracker, FittedTracker)
+    run(tracker, scene, (x, y, w + 12.0, h), 4)
+    assert tracker.framing == Framing()
+
+
 def test_a_walker_standing_still_keeps_the_drawn_box() -> None:
     scene = TexturedScene(start=(60.0, 80.0, 24.0, 60.0), velocity=(0.0, 0.0))
     tracker = make_tracker(TrackerConfig(kind="color", seed=0))

@@ -446,11 +446,12 @@ class FirstBoxConfig(StrictModel):
     `diff_threshold`). Then the strips at each side of the box in which under
     `strip_fraction` of the pixels are on the person (moved, or between two moved pixels
     of their row or column) are trimmed, at most `max_trim` of the box from a side. The
-    tracker starts again on the trimmed box when its height is under `refit_below` of the
-    box's: a margin drawn round a person lies above his head and below his feet, while a
-    tight box has neither, though it may have still strips at a side (a still arm, a
-    planted leg). A box in which under `min_moving_fraction` moved (a person standing
-    still) is kept as it is. Boxes are answered in the framing they were drawn in.
+    tracker starts again on the trimmed box when its area is under `refit_area_below` and
+    its height under `refit_height_below` of the box's: a margin drawn round a person is a
+    good share of the box and lies above his head or below his feet, while a tight box has
+    little, and at its sides (a still arm, a planted leg). A box in which under
+    `min_moving_fraction` moved (a person standing still) is kept as it is. Boxes are
+    answered in the framing they were drawn in.
     """
 
     enabled: bool = True
@@ -459,7 +460,8 @@ class FirstBoxConfig(StrictModel):
     strip_fraction: float = Field(default=0.05, ge=0.0, le=1.0)
     max_trim: float = Field(default=0.25, ge=0.0, lt=0.5)
     min_moving_fraction: float = Field(default=0.02, ge=0.0, le=1.0)
-    refit_below: float = Field(default=0.9, ge=0.0, le=1.0)
+    refit_area_below: float = Field(default=0.8, ge=0.0, le=1.0)
+    refit_height_below: float = Field(default=0.9, ge=0.0, le=1.0)
 
 
 class TrackerConfig(StrictModel):

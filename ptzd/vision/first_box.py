@@ -201,9 +201,12 @@ class FittedTracker:
         enough to matter; the box the tracker now follows."""
         assert self._moved is not None
         fitted = fit_to_motion(self._moved, box, self._config)
-        # a margin drawn round a person lies above his head and below his feet; a tight box
-        # has neither, but may have still strips at a side (a still arm, a planted leg)
-        if fitted[3] >= self._config.refit_below * box[3]:
+        # a margin drawn round a person is a good share of the box and lies above his head
+        # or below his feet; a tight box has little, and at its sides (a still arm, a
+        # planted leg)
+        cfg = self._config
+        small = fitted[2] * fitted[3] < cfg.refit_area_below * box[2] * box[3]
+        if not (small and fitted[3] < cfg.refit_height_below * box[3]):
             return box
         self._framing = Framing.between(fitted, box)
         self.tracker.init(frame, fitted)
