@@ -53,9 +53,20 @@ def test_untrimmed_sides_keep_their_drawn_edges_even_outside_the_frame() -> None
 
 def test_no_more_than_max_trim_comes_off_a_side() -> None:
     moving = np.zeros((300, 300), np.uint8)
-    moving[100:160, 140:160] = 1
+    moving[90:170, 130:170] = 1
     x, y, w, h = fit_to_motion(moving, (100.0, 30.0, 100.0, 200.0), CONFIG)
     assert (x, y, w, h) == (125.0, 80.0, 50.0, 100.0)  # a quarter from each side
+
+
+def test_motion_too_thin_to_be_a_person_keeps_the_box() -> None:
+    # one edge of a plain figure moved (its trailing edge lies on something of its colour,
+    # or outside a box that lags it): what the fit would keep is mostly still
+    moving = np.zeros((200, 200), np.uint8)
+    moving[40:140, 108:110] = 1
+    drawn = (70.0, 25.0, 50.0, 130.0)
+    assert fit_to_motion(moving, drawn, CONFIG) == drawn
+    loose_config = CONFIG.model_copy(update={"min_person_share": 0.0})
+    assert fit_to_motion(moving, drawn, loose_config) != drawn
 
 
 @pytest.mark.parametrize(

@@ -450,7 +450,8 @@ class FirstBoxConfig(StrictModel):
     its height under `refit_height_below` of the box's: a margin drawn round a person is a
     good share of the box and lies above his head or below his feet, while a tight box has
     little, and at its sides (a still arm, a planted leg). A box in which under
-    `min_moving_fraction` moved (a person standing still) is kept as it is. Boxes are
+    `min_moving_fraction` moved (a person standing still), or with under
+    `min_person_share` of the trimmed box on the person, is kept as it is. Boxes are
     answered in the framing they were drawn in.
     """
 
@@ -460,6 +461,9 @@ class FirstBoxConfig(StrictModel):
     strip_fraction: float = Field(default=0.05, ge=0.0, le=1.0)
     max_trim: float = Field(default=0.25, ge=0.0, lt=0.5)
     min_moving_fraction: float = Field(default=0.02, ge=0.0, le=1.0)
+    # The trimmed box is trusted when at least this share of it is on the person (vtest's
+    # walkers 0.63-0.94; a plain figure lagged by its box, moving only at one edge, 0.06).
+    min_person_share: float = Field(default=0.3, ge=0.0, le=1.0)
     refit_area_below: float = Field(default=0.8, ge=0.0, le=1.0)
     refit_height_below: float = Field(default=0.9, ge=0.0, le=1.0)
 

@@ -44,8 +44,9 @@ def fit_to_motion(moving: NDArray[np.uint8], box: Box, config: FirstBoxConfig) -
     people in plain cloth, whose motion is at their outline: the edge they left behind them
     may lie outside a box that follows them, and inside it only the edge they walk into.
     A side with nothing trimmed keeps its edge as drawn (a tight box comes back as it went
-    in); so does the whole box when under `config.min_moving_fraction` of it moved, or
-    when it is under 8 pixels either way inside the frame."""
+    in); so does the whole box when under `config.min_moving_fraction` of it moved, when
+    under `config.min_person_share` of what would be kept is on the person, or when it is
+    under 8 pixels either way inside the frame."""
     height, width = moving.shape[:2]
     x, y, w, h = box
     x0, y0 = max(round(x), 0), max(round(y), 0)
@@ -60,8 +61,13 @@ def fit_to_motion(moving: NDArray[np.uint8], box: Box, config: FirstBoxConfig) -
     along_rows = _between(moving[y0:y1, ex0:ex1], axis=1)[:, x0 - ex0 : x1 - ex0]
     along_cols = _between(moving[ey0:ey1, x0:x1], axis=0)[y0 - ey0 : y1 - ey0, :]
     person = along_rows | along_cols
-    fx, fw = _fitted_side(x, w, x0, person.mean(axis=0), config)
-    fy, fh = _fitted_side(y, h, y0, person.mean(axis=1), config)
+    kept_x, kept_y = _kept(person.mean(axis=0), config), _kept(person.mean(axis=1), config)
+    # motion this thin inside what is kept is not a person's outline filled in (a plain
+    # figure whose trailing edge did not change, a box lagging its walker): keep the box
+    if float(person[slice(*kept_y), slice(*kept_x)].mean()) < config.min_person_share:
+        return box
+    fx, fw = _fitted_side(x, w, x0, x1 - x0, kept_x)
+    fy, fh = _fitted_side(y, h, y0, y1 - y0, kept_y)
     return (fx, fy, fw, fh)
 
 
@@ -75,13 +81,14 @@ def _between(moving: NDArray[np.uint8], axis: int) -> NDArray[np.bool_]:
 
 
 def _fitted_side(
-    start: float, size: float, first: int, profile: NDArray[np.float64], config: FirstBoxConfig
+    start: float, size: float, first: int, length: int, kept: tuple[int, int]
 ) -> tuple[float, float]:
-    """(start, size) of a box along one axis with its still ends trimmed; `first` is the
-    first whole pixel of the box in the frame, `profile` the moving share of each strip."""
-    kept_from, kept_to = _kept(profile, config)
+    """(start, size) of a box along one axis trimmed to the strips `kept` ([from, to) of
+    its `length` whole pixels in the frame, the first of which is `first`); an untrimmed
+    end keeps its edge as drawn."""
+    kept_from, kept_to = kept
     low = start if kept_from == 0 else float(first + kept_from)
-    if kept_to == len(profile):
+    if kept_to == length:
         return (start, size) if kept_from == 0 else (low, start + size - low)
     return low, float(first + kept_to) - low
 
