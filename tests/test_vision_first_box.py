@@ -21,6 +21,12 @@ def loose(box: Box, scale: float) -> Box:
     return (x + w / 2 - scale * w / 2, y + h / 2 - scale * h / 2, scale * w, scale * h)
 
 
+def fitted_tracker(kind: str = "color") -> FittedTracker:
+    tracker = make_tracker(TrackerConfig(kind=kind, seed=0))
+    assert isinstance(tracker, FittedTracker)
+    return tracker
+
+
 def walker_mask(shape: tuple[int, int], x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
     """Moving pixels as a walker leaves them: his outline and a stripe down his middle (a
     swinging arm), nothing inside the plain cloth."""
@@ -139,8 +145,7 @@ def test_a_loose_first_box_is_refitted_to_the_walker_and_answered_in_its_framing
     kind: str, cloth: type[Scene]
 ) -> None:
     scene = cloth(start=(60.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.5))
-    tracker = make_tracker(TrackerConfig(kind=kind, seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker(kind)
     drawn = loose(scene.truth(0), 1.5)
     answers = run(tracker, scene, drawn, 20)
     assert running_kind(tracker, kind) == ("color" if kind == "auto" else kind)
@@ -174,8 +179,7 @@ class GravelScene(TexturedScene):
 def test_the_camera_s_own_motion_is_taken_out_of_the_fit(told: bool) -> None:
     # a pan of 3 px a frame over gravel; the walker steps 2 px a frame the same way
     scene = GravelScene(start=(100.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.0), shift=(3.0, 0.0))
-    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker()
     answers = run(
         tracker, scene, loose(scene.truth(0), 1.5), 3, ego=np.array(scene.shift) if told else None
     )
@@ -195,8 +199,7 @@ def test_a_tight_first_box_is_left_to_the_tracker_as_drawn(cloth: type[Scene]) -
     # in plain cloth (`Scene`) only his outline moves, and the edge he leaves behind is
     # outside the box that follows him: what lies between his edges is him all the same
     scene = cloth(start=(60.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.5))
-    fitted = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(fitted, FittedTracker)
+    fitted = fitted_tracker()
     bare = make_bare_tracker(TrackerConfig(kind="color", seed=0))
     answers = run(fitted, scene, scene.truth(0), 12)
     assert fitted.framing == Framing()
@@ -211,24 +214,21 @@ def test_a_box_with_still_strips_at_a_side_only_is_not_refitted() -> None:
     # are what a tight box has by a still arm or a planted leg, not a drawn margin
     scene = TexturedScene(start=(60.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.5))
     x, y, w, h = scene.truth(0)
-    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker()
     run(tracker, scene, (x, y, w + 12.0, h), 4)
     assert tracker.framing == Framing()
 
 
 def test_a_walker_standing_still_keeps_the_drawn_box() -> None:
     scene = TexturedScene(start=(60.0, 80.0, 24.0, 60.0), velocity=(0.0, 0.0))
-    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker()
     run(tracker, scene, loose(scene.truth(0), 1.5), 5)
     assert tracker.framing == Framing()
 
 
 def test_a_new_init_starts_from_the_drawn_framing_again() -> None:
     scene = TexturedScene(start=(60.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.5))
-    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker()
     run(tracker, scene, loose(scene.truth(0), 1.5), 4)
     assert tracker.framing != Framing()
     tracker.init(scene.frame(4), scene.truth(4))
@@ -242,8 +242,7 @@ def test_the_fit_can_be_turned_off() -> None:
 
 def test_a_zoom_while_the_motion_is_gathered_is_taken_out_too() -> None:
     scene = GravelScene(start=(100.0, 80.0, 24.0, 60.0), velocity=(2.0, 0.0))
-    tracker = make_tracker(TrackerConfig(kind="color", seed=0))
-    assert isinstance(tracker, FittedTracker)
+    tracker = fitted_tracker()
     factor, centre = 1.2, (160.0, 120.0)
     zoom = zoom_homography(factor, centre)
     tracker.init(scene.frame(0), loose(scene.truth(0), 1.5))

@@ -135,6 +135,9 @@ class Framing:
         return (cx - w / 2, cy - h / 2, w, h)
 
 
+_AS_DRAWN = Framing()
+
+
 class FittedTracker:
     """`tracker`, started again on its first box fitted to the person's motion, answering in
     the first box's framing.
@@ -149,7 +152,7 @@ class FittedTracker:
         self._motion = MotionMap(config.stillness.diff_threshold)
         self._moved: NDArray[np.uint8] | None = None  # moved at least once in the frames so far
         self._waiting = 0  # frames of motion still to gather before the fit
-        self._framing = Framing()
+        self._framing = _AS_DRAWN
         self._log = get_logger("vision")
 
     @property
@@ -160,11 +163,10 @@ class FittedTracker:
 
     def init(self, frame: NDArray[np.uint8], box: Box) -> None:
         self.tracker.init(frame, box)
-        self._framing = Framing()
+        self._framing = _AS_DRAWN
         self._moved = None
-        self._waiting = self._config.frames if self._config.enabled else 0
-        if self._waiting:
-            self._motion.reset(frame)
+        self._waiting = self._config.frames
+        self._motion.reset(frame)
 
     def update(
         self, frame: NDArray[np.uint8], ego_motion: NDArray[np.float64] | None = None
@@ -177,6 +179,8 @@ class FittedTracker:
                 if result.state is TrackState.TRACKING:
                     box = self._refit(frame, box)
                 self._moved = None
+        if self._framing == _AS_DRAWN:  # not refitted: the tracker's own answer, untouched
+            return result
         return TrackResult(self._framing.drawn(box), result.state, result.confidence,
                            result.velocity)  # fmt: skip
 
