@@ -170,6 +170,93 @@ class _FlatLikelihood:
         pass
 
 
+class _ScriptedLikelihood(_FlatLikelihood):
+    """Scores the tracker's box `similarity` (set per frame) and counts the model updates."""
+
+    def __init__(self) -> None:
+        self.similarity = 1.0
+        self.adapted = 0
+
+    def part_similarities(self, frame, box):
+        return np.full(1, self.similarity)
+
+    def adapt(self, frame, box):
+        self.adapted += 1
+
+
+@pytest.mark.parametrize("learn_threshold", [0.0, 0.75])
+def test_the_model_learns_only_from_frames_scoring_learn_threshold(learn_threshold: float) -> None:
+    config = TrackerConfig(
+        kind="color",
+        occlusion={"learn_threshold": learn_threshold},
+        stillness={"still_frames": 0},
+    )
+    lik = _ScriptedLikelihood()
+    tracker = ParticleTracker(config, lik)
+    frame = np.zeros((120, 160, 3), np.uint8)
+    tracker.init(frame, (70.0, 40.0, 20.0, 40.0))
+    learnt = []
+    # a clean match; then a box on something in the target's colours, still tracked (above
+    # similarity_threshold 0.6); then the clean match again
+    for similarity in [0.9] * 5 + [0.7] * 20 + [0.9] * 5:
+        lik.similarity = similarity
+        before = lik.adapted
+        assert tracker.update(frame).state is TrackState.TRACKING
+        learnt.append(lik.adapted - before)
+    grey = [0] * 20 if learn_threshold else [1] * 20
+    assert learnt == [1] * 5 + grey + [1] * 5
+
+
+class _BobbingLikelihood(_FlatLikelihood):
+    """A walker stepping (2, 0.5) px a frame whose box bobs 6 px up and down with his gait
+    (8 frames), hidden from frame HIDE on. The frame's first pixel carries the frame index."""
+
+    HIDE, STEP = 60, np.array([2.0, 0.5])
+
+    def truth(self, t: int) -> np.ndarray:
+        return np.array([60.0, 100.0]) + self.STEP * t + [0.0, 6.0 * np.sin(2 * np.pi * t / 8)]
+
+    def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        t = int(frame[0, 0, 0])
+        if t >= self.HIDE:
+            return np.zeros(len(boxes))
+        d2 = ((boxes[:, :2] - self.truth(t)) ** 2).sum(axis=1)
+        return np.exp(-d2 / 50.0)
+
+    def log_likelihood(self, frame, boxes):
+        return 30.0 * self._score(frame, np.asarray(boxes, float))
+
+    def part_similarities(self, frame, box):
+        return self._score(frame, np.asarray(box, float)[None, :])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_coast_walks_at_the_velocity_fitted_to_the_sure_centres(seed: int) -> None:
+    def coast(fit_frames: int) -> np.ndarray:
+        config = TrackerConfig(
+            kind="color",
+            seed=seed,
+            motion={"coast_fit_frames": fit_frames},
+            stillness={"still_frames": 0},
+        )
+        lik = _BobbingLikelihood()
+        tracker = ParticleTracker(config, lik)
+        frame = np.zeros((240, 400, 3), np.uint8)
+        x, y = lik.truth(0)
+        tracker.init(frame, (x - 10, y - 20, 20, 40))
+        for t in range(1, lik.HIDE + 1):
+            frame[0, 0, 0] = t
+            result = tracker.update(frame)
+        assert result.state is TrackState.OCCLUDED
+        return np.array(result.velocity)
+
+    fitted, averaged = coast(25), coast(0)
+    step = _BobbingLikelihood.STEP
+    # the average of the last steps swings with the gait; the fit over a second does not
+    assert np.abs(fitted - step).max() < 0.3
+    assert np.abs(averaged - step).max() > 2 * np.abs(fitted - step).max()
+
+
 def test_reacquires_after_lost_when_the_target_reappears_beyond_the_coast() -> None:
     # hidden for 32 frames behind a 100 px bar: LOST after max_frames, then the target walks
     # out 60-100 px from where the coasting box stopped, beyond the initial search radius

@@ -29,6 +29,11 @@ class MotionConfig(StrictModel):
     # Velocity kept per frame while the target is occluded (1 = coast at full speed: a
     # hidden walker walks on; 0.95 left 28 % after 1 s at 25 fps and lost him).
     occluded_velocity_decay: float = Field(default=1.0, ge=0.0, le=1.0)
+    # The velocity an occluded target coasts at (ours): fitted (least squares) to its sure
+    # centres (similarity >= occlusion.reacquire_threshold) over this many frames up to the
+    # last sure one; 0 = the running average of its steps that the tracked target reports,
+    # which swings with a walker's bob. Off: measured mixed (docs/daemon.md, "second pass").
+    coast_fit_frames: int = Field(default=0, ge=0, le=500)
 
 
 class ColorConfig(StrictModel):
@@ -121,6 +126,11 @@ class OcclusionConfig(StrictModel):
     similarity_threshold: float = Field(default=0.6, ge=0.0, le=1.0)
     # Give up (LOST) after this many consecutive occluded frames.
     max_frames: int = Field(default=30, ge=1, le=10_000)
+    # The colour model learns (GMM update) only from tracked frames scoring at least this
+    # (ours; 0 = from every tracked frame, the seed): a box stuck on an occluder in the
+    # target's colours keeps scoring above similarity_threshold and would teach it the
+    # occluder.
+    learn_threshold: float = Field(default=0.75, ge=0.0, le=1.0)
     # What the target usually scores: the 75th percentile of its last 50 tracked frames.
     # A detection re-identifies a lost target only if it scores at least similarity_threshold
     # and at least `match_share` of that: someone else passing close by does not. 0 (the

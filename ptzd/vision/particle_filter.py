@@ -159,6 +159,8 @@ _RECENT_FRAMES = 50
 _STALL_WINDOW = 4
 _STALL_BEFORE = 0.6
 _STALL_NOW = 0.25
+# the fewest sure centres the coast's velocity is fitted to (else the reported velocity)
+_FIT_MIN = 5
 
 
 class ParticleTracker:
@@ -179,6 +181,11 @@ class ParticleTracker:
         self._velocity: FloatArray = np.zeros(2)
         self._reference: FloatArray = np.ones(2)  # reference (w, h) for the scale bounds
         self._centres: deque[FloatArray] = deque(maxlen=3)  # for the AR2 model
+        self._frame = 0  # updates so far
+        # (frame, centre) of the last sure frames: what the coast's velocity is fitted to
+        self._sure_centres: deque[tuple[int, FloatArray]] = deque(
+            maxlen=max(1, config.motion.coast_fit_frames)
+        )
         self._state = TrackState.LOST
         self._occluded_frames = 0
         self._lost_frames = 0
@@ -220,6 +227,7 @@ class ParticleTracker:
         self._velocity = np.zeros(2)
         self._centres.clear()
         self._centres.append(centre[:2].copy())
+        self._sure_centres.clear()
         self._constrain(frame)
         self._likelihood.init(frame, centre)
         self._state = TrackState.TRACKING
@@ -239,6 +247,7 @@ class ParticleTracker:
     def update(self, frame: Frame, ego_motion: NDArray[np.float64] | None = None) -> TrackResult:
         if not self._initialised:
             raise RuntimeError("init() the tracker before update()")
+        self._frame += 1
         homography = None if ego_motion is None else ego_motion_matrix(ego_motion)
         if homography is not None:
             self._apply(homography)
@@ -288,6 +297,8 @@ class ParticleTracker:
         # half of him is in view (his top above a hedge): the box follows that half
         follows_part = self._shows_a_part(parts, candidate)
         self._transition(sim, weakest, follows_part)
+        if was_tracking and lag is None and self._state is TrackState.OCCLUDED:
+            self._velocity = self._coast_velocity()
         if self._state is not TrackState.OCCLUDED:
             self._stalled = False
         if self._state is TrackState.TRACKING:
@@ -352,6 +363,12 @@ class ParticleTracker:
             pts = np.array(self._centres)
             mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
             self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
+        if self._sure_centres:
+            frames = [f for f, _ in self._sure_centres]
+            pts = np.array([c for _, c in self._sure_centres])
+            mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
+            moved = mapped[:, :2] / mapped[:, 2:3]
+            self._sure_centres = deque(zip(frames, moved, strict=True), self._sure_centres.maxlen)
 
     def _predict(self) -> None:
         p = self._particles
@@ -595,6 +612,7 @@ class ParticleTracker:
         self._velocity = np.zeros(2)
         self._particles[:, [VX, VY]] = 0.0
         self._centres.clear()
+        self._sure_centres.clear()
 
     def _follow(self, frame: Frame, box: FloatArray, *, learn_velocity: bool) -> None:
         n = self._config.num_particles
@@ -607,8 +625,27 @@ class ParticleTracker:
             step = box[:2] - self._box[:2]
             a = VELOCITY_SMOOTHING
             self._velocity = (1 - a) * self._velocity + a * step
+            self._sure_centres.append((self._frame, box[:2].copy()))
         self._box = box
-        self._likelihood.adapt(frame, self._box)
+        if self._confidence >= self._config.occlusion.learn_threshold:
+            self._likelihood.adapt(frame, self._box)
+
+    def _coast_velocity(self) -> FloatArray:
+        """What a target hidden this frame coasts at: the least-squares velocity of its sure
+        centres over the `coast_fit_frames` frames (MotionConfig) up to the last sure one,
+        or, with fewer than _FIT_MIN of them, the reported velocity."""
+        window = self._config.motion.coast_fit_frames
+        if window == 0 or not self._sure_centres:
+            return self._velocity
+        last = self._sure_centres[-1][0]
+        recent = [(f, c) for f, c in self._sure_centres if f > last - window]
+        if len(recent) < _FIT_MIN:
+            return self._velocity
+        t = np.array([f for f, _ in recent], float)
+        centres = np.array([c for _, c in recent])
+        t -= t.mean()
+        slope: FloatArray = t @ (centres - centres.mean(axis=0)) / float(t @ t)
+        return slope
 
     def _coast(self) -> None:
         if not self._stalled:  # behind an occluder a walker walks on; otherwise slow down
