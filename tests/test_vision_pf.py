@@ -214,14 +214,17 @@ class _BobbingLikelihood(_FlatLikelihood):
     HIDE, STEP = 60, np.array([2.0, 0.5])
 
     def truth(self, t: int) -> np.ndarray:
-        return np.array([60.0, 100.0]) + self.STEP * t + [0.0, 6.0 * np.sin(2 * np.pi * t / 8)]
+        bob = np.array([0.0, 6.0 * np.sin(2 * np.pi * t / 8)])
+        centre: np.ndarray = np.array([60.0, 100.0]) + self.STEP * t + bob
+        return centre
 
     def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         t = int(frame[0, 0, 0])
         if t >= self.HIDE:
             return np.zeros(len(boxes))
         d2 = ((boxes[:, :2] - self.truth(t)) ** 2).sum(axis=1)
-        return np.exp(-d2 / 50.0)
+        score: np.ndarray = np.exp(-d2 / 50.0)
+        return score
 
     def log_likelihood(self, frame, boxes):
         return 30.0 * self._score(frame, np.asarray(boxes, float))

@@ -58,6 +58,13 @@ def weighted_resample(
     return np.concatenate([top, top[picks]])
 
 
+def map_points(homography: FloatArray, points: FloatArray) -> FloatArray:
+    """Image points (n, 2) of the previous frame mapped into this one by `homography`."""
+    mapped = np.column_stack([points, np.ones(len(points))]) @ homography.T
+    out: FloatArray = mapped[:, :2] / mapped[:, 2:3]
+    return out
+
+
 def apply_homography(
     homography: FloatArray, boxes: FloatArray, velocities: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -360,14 +367,10 @@ class ParticleTracker:
         self._box, self._velocity = box[0], v[0]
         self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
         if self._centres:
-            pts = np.array(self._centres)
-            mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
-            self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
+            self._centres = deque(map_points(homography, np.array(self._centres)), maxlen=3)
         if self._sure_centres:
             frames = [f for f, _ in self._sure_centres]
-            pts = np.array([c for _, c in self._sure_centres])
-            mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
-            moved = mapped[:, :2] / mapped[:, 2:3]
+            moved = map_points(homography, np.array([c for _, c in self._sure_centres]))
             self._sure_centres = deque(zip(frames, moved, strict=True), self._sure_centres.maxlen)
 
     def _predict(self) -> None:

@@ -57,6 +57,7 @@ from ptzd.vision.particle_filter import (
     apply_homography,
     ar2_drift,
     ego_motion_matrix,
+    map_points,
     weighted_resample,
     zoom_homography,
 )
@@ -392,9 +393,7 @@ class RfTracker:
         self._box, self._velocity = box[0], vel[0]
         self._sure.transform(homography)
         if self._centres:
-            pts = np.array(self._centres)
-            mapped = np.column_stack([pts, np.ones(len(pts))]) @ homography.T
-            self._centres = deque(mapped[:, :2] / mapped[:, 2:3], maxlen=3)
+            self._centres = deque(map_points(homography, np.array(self._centres)), maxlen=3)
 
     def _predict(self, shape: tuple[int, ...]) -> None:
         """Seed eqs. 12-14: centres drift by the floored mean of the last two velocities;
