@@ -190,8 +190,9 @@ class ParticleTracker:
         self._centres: deque[FloatArray] = deque(maxlen=3)  # for the AR2 model
         self._frame = 0  # updates so far
         # (frame, centre) of the last sure frames: what the coast's velocity is fitted to
+        # (maxlen 0 with the fit off: nothing is kept, nothing mapped on ego-motion)
         self._sure_centres: deque[tuple[int, FloatArray]] = deque(
-            maxlen=max(1, config.motion.coast_fit_frames)
+            maxlen=config.motion.coast_fit_frames
         )
         self._state = TrackState.LOST
         self._occluded_frames = 0
