@@ -184,6 +184,21 @@ class _ScriptedLikelihood(_FlatLikelihood):
         self.adapted += 1
 
 
+def _learnt(config: TrackerConfig, similarities: list[float]) -> list[int]:
+    """Per frame, whether the colour model learned (the tracker on a scripted score)."""
+    lik = _ScriptedLikelihood()
+    tracker = ParticleTracker(config, lik)
+    frame = np.zeros((120, 160, 3), np.uint8)
+    tracker.init(frame, (70.0, 40.0, 20.0, 40.0))
+    learnt = []
+    for similarity in similarities:
+        lik.similarity = similarity
+        before = lik.adapted
+        assert tracker.update(frame).state is TrackState.TRACKING
+        learnt.append(lik.adapted - before)
+    return learnt
+
+
 @pytest.mark.parametrize("learn_threshold", [0.0, 0.75])
 def test_the_model_learns_only_from_frames_scoring_learn_threshold(learn_threshold: float) -> None:
     config = TrackerConfig(
@@ -191,18 +206,9 @@ def test_the_model_learns_only_from_frames_scoring_learn_threshold(learn_thresho
         occlusion={"learn_threshold": learn_threshold},
         stillness={"still_frames": 0},
     )
-    lik = _ScriptedLikelihood()
-    tracker = ParticleTracker(config, lik)
-    frame = np.zeros((120, 160, 3), np.uint8)
-    tracker.init(frame, (70.0, 40.0, 20.0, 40.0))
-    learnt = []
     # a clean match; then a box on something in the target's colours, still tracked (above
     # similarity_threshold 0.6); then the clean match again
-    for similarity in [0.9] * 5 + [0.7] * 20 + [0.9] * 5:
-        lik.similarity = similarity
-        before = lik.adapted
-        assert tracker.update(frame).state is TrackState.TRACKING
-        learnt.append(lik.adapted - before)
+    learnt = _learnt(config, [0.9] * 5 + [0.7] * 20 + [0.9] * 5)
     grey = [0] * 20 if learn_threshold else [1] * 20
     assert learnt == [1] * 5 + grey + [1] * 5
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ptzd.vision.config import LkMotion, TrackerConfig
-from ptzd.vision.features import ColourTextureMaps, lbp_riu2, rgb_codes, to_grey
+from ptzd.vision.features import ColourTextureMaps, grey_codes, lbp_riu2, rgb_codes, to_grey
 from ptzd.vision.svm import (
     LucasKanade,
     Mode,
@@ -56,6 +56,41 @@ def test_rgb_bins_and_37_d_histograms() -> None:
     assert h[0, 18] == pytest.approx(1.0)  # r = 2, g = b = 0
     assert h[0, 27 + 8] == pytest.approx(1.0)  # flat texture: LBP code 8
     assert h[1, :27].sum() == pytest.approx(0.25)  # three quarters outside the frame
+
+
+def test_grey_levels_fill_the_27_colour_bins() -> None:
+    assert grey_codes(np.array([[0, 9, 10, 255]], np.uint8)).tolist() == [[0, 0, 1, 26]]
+    ramp = np.tile(np.arange(0, 256, 4, dtype=np.uint8), (64, 1))  # 64 grey levels
+    box = np.array([[32.0, 32.0, 64.0, 64.0]])
+    grey = ColourTextureMaps(ramp, (0, 0, 64, 64), grid=64, grey=True).histograms(box)[0]
+    as_rgb = ColourTextureMaps(ramp, (0, 0, 64, 64), grid=64).histograms(box)[0]
+    assert np.count_nonzero(grey[:27]) == 27
+    assert np.nonzero(as_rgb[:27])[0].tolist() == [0, 13, 26]  # the RGB cube's diagonal
+
+
+@pytest.mark.parametrize(("grey_levels", "channels"), [(True, 1), (True, 3), (False, 1)])
+def test_a_grey_scene_s_look_alike_is_told_apart_by_its_grey_levels(
+    grey_levels: bool, channels: int
+) -> None:
+    # a warm walker and a still figure whose grey levels fall in the same thirds of 0..255
+    # (one RGB bin) but not in the same of 27 grey levels; single-channel, or grey in three
+    # equal channels (a day/night camera at night)
+    grey = np.full((120, 160), 40, np.uint8)
+    grey[30:50, 30:46], grey[50:70, 30:46] = 150, 110
+    grey[30:50, 110:126], grey[50:70, 110:126] = 160, 100
+    frame = grey if channels == 1 else np.asarray(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR), np.uint8)
+    tracker = SvmTracker(TrackerConfig(kind="svm", svm={"grey_levels": grey_levels}))
+    tracker.init(frame, (30.0, 30.0, 16.0, 40.0))
+    # one box per call: the sampled region's edge would change LBP codes at a box's side
+    box = np.array([[38.0, 50.0, 16.0, 40.0]])
+    walker = float(tracker.model.probability(tracker._features(frame, box))[0])
+    box[0, 0] = 118.0
+    look_alike = float(tracker.model.probability(tracker._features(frame, box))[0])
+    assert walker > 0.8
+    if grey_levels:
+        assert look_alike < 0.2
+    else:
+        assert look_alike == pytest.approx(walker, abs=1e-9)  # the same 37 values
 
 
 def test_band_histograms_by_hand_and_summing_to_the_whole_box() -> None:

@@ -344,6 +344,10 @@ class SvmConfig(StrictModel):
     # bottom (37 values each): a whole-box histogram hardly minds where in the box the
     # walker is, so the box sat an eighth of the walker low (vtest.avi). 1 = the seed.
     parts: int = Field(default=2, ge=1, le=8)
+    # Beyond the seed: on a grey scene (single-channel frames, or three equal channels in the
+    # init box: thermal, a day/night camera at night) the colour histogram's 27 bins hold
+    # grey levels; false = grey as RGB, three bins on the cube's diagonal.
+    grey_levels: bool = True
     sigma_xy: float = Field(default=0.15, ge=0.0, le=5.0)
     sigma_scale: float = Field(default=0.02, ge=0.0, le=1.0)
     # Beyond the seed: the PF's particles drift by the target's velocity (learned from the

@@ -233,23 +233,36 @@ def rgb_codes(bgr: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.asarray(q[..., 2] * 9 + q[..., 1] * 3 + q[..., 0], dtype=np.uint8)
 
 
+def grey_codes(grey: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The colour histogram's 27 bins as grey levels (0..26): on a single-channel frame the
+    RGB cube's diagonal would leave three of them in use."""
+    levels = (np.arange(256) * RGB_BINS // 256).astype(np.uint8)
+    return np.asarray(cv2.LUT(grey, levels), dtype=np.uint8)
+
+
 class ColourTextureMaps:
-    """Per-pixel RGB and LBP codes over a region; 37-d box histograms (per band) on a grid."""
+    """Per-pixel colour and LBP codes over a region; 37-d box histograms (per band) on a grid.
+
+    The 27 colour bins are RGB 3x3x3, or grey levels (`grey_codes`) with `grey`: a grey
+    frame's RGB codes all lie on the cube's diagonal, three bins of the 27."""
 
     def __init__(
-        self, bgr: NDArray[np.uint8], region: tuple[int, int, int, int], grid: int
+        self,
+        frame: NDArray[np.uint8],
+        region: tuple[int, int, int, int],
+        grid: int,
+        grey: bool = False,
     ) -> None:
         x0, y0, x1, y1 = region
         self.origin = (x0, y0)
-        patch = bgr[y0:y1, x0:x1]
-        # one code image: RGB bin 0..26 in the low part, LBP code 0..9 after it; a border of
-        # an "outside" value counted by neither histogram
-        self._rgb = cv2.copyMakeBorder(
-            rgb_codes(patch), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=RGB_BINS
-        )  # fmt: skip
-        grey = np.asarray(cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY), dtype=np.uint8)
+        patch = frame[y0:y1, x0:x1]
+        grey_patch = to_grey(patch)
+        codes = grey_codes(grey_patch) if grey else rgb_codes(to_bgr(patch))
+        # one code image: colour bin 0..26 in the low part, LBP code 0..9 after it; a border
+        # of an "outside" value counted by neither histogram
+        self._rgb = cv2.copyMakeBorder(codes, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=RGB_BINS)
         self._lbp = cv2.copyMakeBorder(
-            lbp_riu2(grey), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=LBP_BINS
+            lbp_riu2(grey_patch), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=LBP_BINS
         )
         self._grid = grid
 

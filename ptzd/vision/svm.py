@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 from sklearn.svm import SVC
 
-from ptzd.vision.color import ColourVote
+from ptzd.vision.color import ColourVote, is_colour
 from ptzd.vision.config import LkMotion, SvmConfig, TrackerConfig
 from ptzd.vision.features import ColourTextureMaps, region_of, to_bgr, to_grey
 from ptzd.vision.learning import LearningGate
@@ -261,14 +261,16 @@ class SvmTracker:
         self._occluded = 0
         self._unsure = 0  # frames in a row without a confident box
         self._candidate: FloatArray | None = None  # the last scan's find
+        self._grey = False  # features from grey levels (SvmConfig.grey_levels)
         self._initialised = False
 
     @property
     def state(self) -> TrackState:
         return self._state
 
-    def _features(self, bgr: NDArray[np.uint8], boxes: FloatArray) -> FloatArray:
-        maps = ColourTextureMaps(bgr, region_of(boxes, bgr.shape), self._svm_config.grid)
+    def _features(self, frame: NDArray[np.uint8], boxes: FloatArray) -> FloatArray:
+        region = region_of(boxes, frame.shape)
+        maps = ColourTextureMaps(frame, region, self._svm_config.grid, self._grey)
         return maps.histograms(boxes, self._svm_config.parts)
 
     def init(self, frame: Frame, box: Box) -> None:
@@ -276,6 +278,8 @@ class SvmTracker:
         cfg = self._svm_config
         self._rng = np.random.default_rng(self._config.seed)
         self._reference = self._box[2:].copy()
+        # a grey scene (thermal, a day/night camera at night) is described in grey levels
+        self._grey = cfg.grey_levels and not is_colour(frame, self._box)
         bgr = to_bgr(frame)
         # seed Fig. 3: positives are the boxes closest to the init box
         near = self._jitter(self._box, cfg.positives - 1, 0.05, 0.03)
