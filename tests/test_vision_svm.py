@@ -29,6 +29,7 @@ from tests.vision_helpers import (
     iou,
     synthetic_window,
     twin_outcomes,
+    twin_scene,
     vanishing_walker,
 )
 
@@ -344,6 +345,34 @@ def test_a_still_look_alike_is_let_go_and_the_walker_found() -> None:
     assert all(s is TrackState.TRACKING and w > 0.6 for s, w, _ in outcome["shipped"])
     assert all(s is TrackState.TRACKING and t > 0.6 for s, _, t in outcome["no still rule"])
     assert all(s is TrackState.LOST and t > 0.5 for s, _, t in outcome["no scan"])
+
+
+@pytest.mark.parametrize("still_negatives", [True, False])
+def test_the_still_figure_let_go_becomes_a_negative(still_negatives: bool) -> None:
+    # the walker leaves his still twin behind and LK and the SVM stay on the twin; on the
+    # frame the still rule lets go of it, the box joins the negatives and the SVM is
+    # retrained; the scan then finds the walker as before
+    scene, frames = twin_scene(1.5, 80)
+    x, y, w, h = scene.start
+    twin = np.array([[x + w / 2, y + h / 2, w, h]])
+    tracker = SvmTracker(TrackerConfig(kind="svm", svm={"still_negatives": still_negatives}))
+    tracker.init(frames[0], scene.truth(0))
+    let_go_at, retrains = None, 0
+    for t, frame in enumerate(frames[1:], 1):
+        before = tracker.retrains
+        tracker.update(frame)
+        if let_go_at is None and tracker.still_negatives:
+            let_go_at, retrains = t, tracker.retrains - before
+    assert iou(tracker._result().box, scene.truth(79)) > 0.6  # on the walker at the end
+    if not still_negatives:
+        assert let_go_at is None
+        return
+    assert let_go_at is not None and retrains == 1
+    assert len(tracker.still_negatives) == 5
+    # what was learned as background is the twin's box
+    twin_features = tracker._features(frames[let_go_at], twin)
+    similarity = intersection_kernel(np.array(tracker.still_negatives), twin_features)
+    assert similarity.min() > 0.8
 
 
 def test_retrains_after_15_new_positives_and_tracks() -> None:

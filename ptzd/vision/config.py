@@ -368,6 +368,10 @@ class SvmConfig(StrictModel):
     # counts as occluded, and the scan takes only boxes in which something moved; the
     # thresholds are `[tracker.stillness]`'s. 0 = off.
     still_frames: int = Field(default=15, ge=0, le=10_000)
+    # Beyond the seed: the box the still rule lets go (five jittered copies of it) joins the
+    # negatives of every retraining from then on, and the SVM is retrained at once: LK and
+    # the SVM had been holding on to the background a walker left. false = not learned.
+    still_negatives: bool = True
     # Beyond the seed: on colour frames the PF's weights are multiplied by the colour
     # tracker's likelihood (`tracker.color`) to this power; its model learns from confident
     # boxes. 0 = off (the seed's SVM alone). Off on grey frames.

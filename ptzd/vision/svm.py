@@ -47,6 +47,8 @@ from ptzd.vision.stillness import MotionMap, StillCounter, camera_still
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
 _MIN_SIZE = 4.0
+# boxes kept as negatives from the still rule's finds (SvmConfig.still_negatives)
+_STILL_NEGATIVES = 20
 # LK template = the box grown by this factor (context around the target; ours).
 _LK_MARGIN = 1.3
 
@@ -251,6 +253,8 @@ class SvmTracker:
         self._coasting = False  # this occlusion's report walks on
         self._particles: FloatArray = np.zeros((config.svm.num_particles, 4))
         self.positives: deque[FloatArray] = deque(maxlen=config.svm.positives)
+        # boxes the still rule let go: negatives for every retraining from then on
+        self.still_negatives: deque[FloatArray] = deque(maxlen=_STILL_NEGATIVES)
         self.new_positives = 0
         self.learned_positives = 0  # positives added since init
         self.retrains = 0
@@ -285,6 +289,7 @@ class SvmTracker:
         near = self._jitter(self._box, cfg.positives - 1, 0.05, 0.03)
         pos = self._features(bgr, np.vstack([self._box[None], near]))
         self.positives = deque(pos, maxlen=cfg.positives)
+        self.still_negatives.clear()
         self._retrain(bgr)
         self.retrains = 0
         self.learned_positives = 0
@@ -315,7 +320,7 @@ class SvmTracker:
         negatives = sample_negatives(self._box, cfg.negatives, 2.0, bgr.shape, self._rng)
         neg = self._features(bgr, negatives)
         pos = np.array(self.positives)
-        x = np.vstack([pos, neg])
+        x = np.vstack([pos, neg, *self.still_negatives])
         y = np.zeros(x.shape[0], bool)
         y[: pos.shape[0]] = True
         self.model.fit(x, y)
@@ -355,6 +360,10 @@ class SvmTracker:
         still = bool(cfg.still_frames) and self._still.count_box(self._motion, box)
         if still:
             confidence = 0.0  # on something that does not move: not the target
+            if cfg.still_negatives and self._still.run == cfg.still_frames:
+                # what the box held still for so long is the background: teach it so
+                self.still_negatives.extend(self._features(bgr, self._jitter(box, 5, 0.05, 0.0)))
+                self._retrain(bgr)
         jumped = False
         if confidence > cfg.confidence:
             self._unsure = 0
