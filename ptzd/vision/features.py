@@ -234,8 +234,8 @@ def rgb_codes(bgr: NDArray[np.uint8]) -> NDArray[np.uint8]:
 
 
 def grey_codes(grey: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """The colour histogram's 27 bins as grey levels (0..26): on a single-channel frame the
-    RGB cube's diagonal would leave three of them in use."""
+    """The colour histogram's 27 bins as grey levels (0..26): on a grey frame the RGB
+    cube's diagonal would leave three of them in use."""
     levels = (np.arange(256) * RGB_BINS // 256).astype(np.uint8)
     return np.asarray(cv2.LUT(grey, levels), dtype=np.uint8)
 

@@ -17,7 +17,9 @@ out of sight: after a few frames without a confident box the SVM scores a grid o
 around the held box, growing with the wait, and a box it is confident of on two frames
 running is taken (`SvmConfig.scan_after`); and a box in which nothing moved for
 `SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
-which something moved (ptzd/vision/stillness.py).
+which something moved (ptzd/vision/stillness.py); that box becomes a negative of every
+retraining after (`still_negatives`). On a grey scene (thermal, night) the colour
+histogram's 27 bins hold grey levels (`grey_levels`).
 """
 
 from __future__ import annotations
