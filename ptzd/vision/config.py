@@ -363,6 +363,13 @@ class SvmConfig(StrictModel):
     scan_radius: float = Field(default=1.0, ge=0.0, le=20.0)
     scan_growth: float = Field(default=0.1, ge=0.0, le=5.0)
     scan_max_radius: float = Field(default=8.0, ge=0.0, le=20.0)
+    # Beyond the seed: a confident box under `challenge_below` (not sure) for `scan_after`
+    # frames in a row is challenged by the same grid, its radius growing with the frames
+    # since the last sure box, and a box there scoring `challenge_margin` above it on two
+    # frames running is taken (the cloud drifted onto a passer-by the SVM half believes
+    # while the target it believes is beside him). 0 = off.
+    challenge_below: float = Field(default=0.9, ge=0.0, le=1.0)
+    challenge_margin: float = Field(default=0.2, ge=0.0, le=1.0)
     # Beyond the seed: a box in which nothing moved for `still_frames` frames in a row is not
     # the target (LK and the SVM both hold on to a look-alike that does not move), so it
     # counts as occluded, and the scan takes only boxes in which something moved; the
@@ -389,6 +396,11 @@ class SvmConfig(StrictModel):
     # slow down); the PF and the scan stay where the target went out of sight. false = held.
     coast: bool = True
     coast_confidence: float = Field(default=0.9, ge=0.0, le=1.0)
+    # Beyond the seed: while a coasted occlusion lasts, the boxes within a quarter of a box
+    # of where the coast has walked to are scored too, and one scoring coast_confidence,
+    # found on two frames running, is taken (he came out where the coast said, beyond the
+    # scan's reach from where he went in). false = off.
+    coast_scan: bool = True
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

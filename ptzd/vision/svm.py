@@ -12,14 +12,18 @@ takes over until the tracked patch's confidence exceeds h2, when LK restarts fro
 template. Patches tracked with error < h1 or confidence > h2 - and confidence > h2 - join
 the positives; after 15 new ones the SVM is retrained (with fresh background negatives).
 
-Beyond the seed, two rules for occlusions, where LK and the PF wait where the target went
-out of sight: after a few frames without a confident box the SVM scores a grid of boxes
-around the held box, growing with the wait, and a box it is confident of on two frames
-running is taken (`SvmConfig.scan_after`); and a box in which nothing moved for
-`SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
-which something moved (ptzd/vision/stillness.py); that box becomes a negative of every
-retraining after (`still_negatives`). On a grey scene (thermal, night) the colour
-histogram's 27 bins hold grey levels (`grey_levels`).
+Beyond the seed, rules for occlusions, where LK and the PF wait where the target went out
+of sight: after a few frames without a confident box the SVM scores a grid of boxes around
+the held box, growing with the wait, and a box it is confident of on two frames running is
+taken (`SvmConfig.scan_after`; ptzd/vision/scan.py); a confident box it is not sure of is
+challenged by the same grid and gives way to a box there it scores well above it, found on
+two frames running (`challenge_below`: the cloud drifted onto a passer-by); while an
+occlusion is coasted, a box the SVM is sure of where the coast has walked to is taken too
+(`coast_scan`); and a box in which nothing moved for `SvmConfig.still_frames` frames counts
+as occluded, the scan then taking only boxes in which something moved
+(ptzd/vision/stillness.py); that box becomes a negative of every retraining after
+(`still_negatives`). On a grey scene (thermal, night) the colour histogram's 27 bins hold
+grey levels (`grey_levels`).
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.rf import sample_negatives
+from ptzd.vision.scan import FoundTwice, grid_around, reach
 from ptzd.vision.stillness import MotionMap, StillCounter, camera_still
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
@@ -266,7 +271,8 @@ class SvmTracker:
         self._confidence = 0.0
         self._occluded = 0
         self._unsure = 0  # frames in a row without a confident box
-        self._candidate: FloatArray | None = None  # the last scan's find
+        self._weak = 0  # frames in a row with a box under `challenge_below`
+        self._finds = FoundTwice()  # the scan's finds
         self._grey = False  # features from grey levels (SvmConfig.grey_levels)
         self._initialised = False
 
@@ -304,7 +310,8 @@ class SvmTracker:
         self._confidence = 1.0
         self._occluded = 0
         self._unsure = 0
-        self._candidate = None
+        self._weak = 0
+        self._finds.clear()
         self._motion.reset(frame)
         self._still.reset()
         self._initialised = True
@@ -367,25 +374,30 @@ class SvmTracker:
                 self.still_negatives.extend(self._features(bgr, self._jitter(box, 5, 0.05, 0.0)))
                 self._retrain(bgr)
         jumped = False
+        challenged = bool(cfg.challenge_below) and confidence < cfg.challenge_below
+        self._weak = self._weak + 1 if challenged else 0
+        found: tuple[FloatArray, float] | None = None
         if confidence > cfg.confidence:
             self._unsure = 0
-            self._candidate = None
+            if challenged and cfg.scan_after and self._weak >= cfg.scan_after:
+                # a box the SVM only half believes (a passer-by the cloud drifted onto)
+                # gives way to one near it that it believes far more
+                found = self._scan(bgr, self._weak, confidence + cfg.challenge_margin)
         else:
             self._unsure += 1
             if cfg.scan_after and self._unsure >= cfg.scan_after:
-                found = self._scan(bgr)
-                previous, self._candidate = self._candidate, None if found is None else found[0]
-                # taken when found on two frames running (once, it was half a body low on
-                # legs and ground as often as on the walker)
-                if (
-                    found is not None
-                    and previous is not None
-                    and np.all(np.abs(found[0][:2] - previous[:2]) <= 0.5 * found[0][2:])
-                ):
-                    box, confidence = found
-                    jumped = True
-                    self.mode = Mode.PF  # so step 7 below restarts LK from the found box
-                    self._still.reset()
+                found = self._scan(bgr, self._unsure, cfg.confidence)
+            ahead = self._scan_coast(bgr) if cfg.coast_scan else None
+            if ahead is not None and (found is None or ahead[1] >= found[1]):
+                found = ahead
+        taken = self._finds.offer(None if found is None else found[0])
+        if taken and found is not None:
+            box, confidence = found
+            jumped = True
+            if confidence >= cfg.challenge_below:
+                self._weak = 0  # (a find it half believes is no end to the doubt)
+            self.mode = Mode.PF  # so step 7 below restarts LK from the found box
+            self._still.reset()
         self._confidence = confidence
         if jumped:  # the scan's find starts a new history: the jump is no step
             self._sure.restart(box, keep_velocity=True)
@@ -426,28 +438,44 @@ class SvmTracker:
                     self._retrain(bgr)
         return self._result()
 
-    def _scan(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
-        """The best box of a grid around the held box, if the SVM is confident of it."""
+    def _scan(
+        self, bgr: NDArray[np.uint8], waited: int, floor: float
+    ) -> tuple[FloatArray, float] | None:
+        """The best box of a grid around the held box, if the SVM scores it above `floor`.
+
+        The grid reaches further the longer the box has been doubted (`waited` frames).
+        """
         cfg = self._svm_config
-        radius = min(
-            cfg.scan_max_radius, cfg.scan_radius + cfg.scan_growth * (self._unsure - cfg.scan_after)
+        radius = reach(
+            waited, cfg.scan_after, cfg.scan_radius, cfg.scan_growth, cfg.scan_max_radius
         )
-        w, h = self._box[2:]
-        step = cfg.scan_step
-        dx = np.arange(-radius, radius + 1e-9, step) * w
-        dy = np.arange(-0.5, 0.5 + 1e-9, step) * h
-        gx, gy = np.meshgrid(self._box[0] + dx, self._box[1] + dy)
-        keep = (gx >= 0) & (gx < bgr.shape[1]) & (gy >= 0) & (gy < bgr.shape[0])
-        if not keep.any():
+        grid = grid_around(self._box, radius, cfg.scan_step, bgr.shape)
+        if grid.shape[0] == 0:
             return None
-        grid = np.column_stack([gx[keep], gy[keep], np.full(keep.sum(), w), np.full(keep.sum(), h)])
         prob = self.model.probability(self._features(bgr, grid))
         if cfg.still_frames:
             moved = self._motion.moving_fraction(grid)
             if moved is not None:
                 prob = np.where(moved >= self._still.min_fraction, prob, 0.0)
         best = int(np.argmax(prob))
-        if prob[best] <= cfg.confidence:
+        if prob[best] <= floor:
+            return None
+        return grid[best], float(prob[best])
+
+    def _scan_coast(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
+        """While an occlusion is coasted, the best box within a quarter of a box of where
+        the coast has walked to by this frame, if the SVM is sure of it."""
+        cfg = self._svm_config
+        if not (self._coasting and self._state is TrackState.OCCLUDED):
+            return None
+        ahead = self._box.copy()
+        ahead[:2] += (self._occluded + 1) * self._sure.velocity
+        grid = grid_around(ahead, 0.25, cfg.scan_step, bgr.shape)
+        if grid.shape[0] == 0:
+            return None
+        prob = self.model.probability(self._features(bgr, grid))
+        best = int(np.argmax(prob))
+        if prob[best] < cfg.coast_confidence:
             return None
         return grid[best], float(prob[best])
 
@@ -515,8 +543,7 @@ class SvmTracker:
         self._sure.transform(homography)
         self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
         self.lk.warp = homography @ self.lk.warp
-        if self._candidate is not None:  # the last scan's find moves with the image too
-            self._candidate = apply_homography(homography, self._candidate[None], zeros[:1])[0][0]
+        self._finds.transform(homography)
 
     def _result(self) -> TrackResult:
         cx, cy, w, h = (float(v) for v in self._box)

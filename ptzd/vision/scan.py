@@ -1,0 +1,60 @@
+"""svm's local scan: a grid of boxes around the box, and the two-frame rule.
+
+LK and the learned PF follow the target from where it was. When they lose it (it came out
+of an occlusion away from them, or the cloud drifted onto a passer-by the SVM half
+believes), a grid of boxes of the target's size around the box is scored by the SVM, and
+the best box is taken only when it is found on two frames running (`FoundTwice`): once, it
+was half a body low on legs and ground as often as on the walker.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ptzd.vision.likelihood import FloatArray
+from ptzd.vision.particle_filter import apply_homography
+
+
+def reach(waited: int, after: int, start: float, growth: float, cap: float) -> float:
+    """The grid's radius in box widths: `start` once the box has been doubted for `after`
+    frames, growing by `growth` a frame with the `waited` frames, up to `cap`
+    (`SvmConfig.scan_radius`, `scan_growth`, `scan_max_radius`)."""
+    return min(cap, start + growth * (waited - after))
+
+
+def grid_around(box: FloatArray, radius: float, step: float, shape: tuple[int, ...]) -> FloatArray:
+    """Boxes of `box`'s size (cx, cy, w, h), centres `step` box sizes apart, within `radius`
+    box widths left and right and half a box height up and down; centres in the frame."""
+    w, h = float(box[2]), float(box[3])
+    dx = np.arange(-radius, radius + 1e-9, step) * w
+    dy = np.arange(-0.5, 0.5 + 1e-9, step) * h
+    gx, gy = np.meshgrid(box[0] + dx, box[1] + dy)
+    keep = (gx >= 0) & (gx < shape[1]) & (gy >= 0) & (gy < shape[0])
+    n = int(keep.sum())
+    return np.column_stack([gx[keep], gy[keep], np.full(n, w), np.full(n, h)])
+
+
+class FoundTwice:
+    """A scan's find is taken when the next frame's scan finds a box within half a box of
+    it (centre to centre)."""
+
+    def __init__(self) -> None:
+        self.candidate: FloatArray | None = None  # the last scan's find
+
+    def offer(self, found: FloatArray | None) -> bool:
+        """This frame's find (None: the scan found nothing, or did not run): taken?"""
+        previous, self.candidate = self.candidate, found
+        return (
+            found is not None
+            and previous is not None
+            and bool(np.all(np.abs(found[:2] - previous[:2]) <= 0.5 * found[2:]))
+        )
+
+    def clear(self) -> None:
+        self.candidate = None
+
+    def transform(self, homography: FloatArray) -> None:
+        """The find moves with the image (ego-motion, zoom)."""
+        if self.candidate is not None:
+            moved, _ = apply_homography(homography, self.candidate[None], np.zeros((1, 2)))
+            self.candidate = moved[0]
