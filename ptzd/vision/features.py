@@ -233,11 +233,14 @@ def rgb_codes(bgr: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.asarray(q[..., 2] * 9 + q[..., 1] * 3 + q[..., 0], dtype=np.uint8)
 
 
+# grey level 0..255 -> colour bin 0..26, for `grey_codes`
+_GREY_LEVELS = (np.arange(256) * RGB_BINS // 256).astype(np.uint8)
+
+
 def grey_codes(grey: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """The colour histogram's 27 bins as grey levels (0..26): on a grey frame the RGB
     cube's diagonal would leave three of them in use."""
-    levels = (np.arange(256) * RGB_BINS // 256).astype(np.uint8)
-    return np.asarray(cv2.LUT(grey, levels), dtype=np.uint8)
+    return np.asarray(cv2.LUT(grey, _GREY_LEVELS), dtype=np.uint8)
 
 
 class ColourTextureMaps:

@@ -15,13 +15,6 @@ from ptzd.vision.likelihood import FloatArray
 from ptzd.vision.particle_filter import apply_homography
 
 
-def reach(waited: int, after: int, start: float, growth: float, cap: float) -> float:
-    """The grid's radius in box widths: `start` once the box has been doubted for `after`
-    frames, growing by `growth` a frame with the `waited` frames, up to `cap`
-    (`SvmConfig.scan_radius`, `scan_growth`, `scan_max_radius`)."""
-    return min(cap, start + growth * (waited - after))
-
-
 def grid_around(box: FloatArray, radius: float, step: float, shape: tuple[int, ...]) -> FloatArray:
     """Boxes of `box`'s size (cx, cy, w, h), centres `step` box sizes apart, within `radius`
     box widths left and right and half a box height up and down; centres in the frame."""

@@ -49,7 +49,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.rf import sample_negatives
-from ptzd.vision.scan import FoundTwice, grid_around, reach
+from ptzd.vision.scan import FoundTwice, grid_around
 from ptzd.vision.stillness import MotionMap, StillCounter, camera_still
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
@@ -446,21 +446,11 @@ class SvmTracker:
         The grid reaches further the longer the box has been doubted (`waited` frames).
         """
         cfg = self._svm_config
-        radius = reach(
-            waited, cfg.scan_after, cfg.scan_radius, cfg.scan_growth, cfg.scan_max_radius
-        )
+        growth = cfg.scan_growth * (waited - cfg.scan_after)
+        radius = min(cfg.scan_max_radius, cfg.scan_radius + growth)
         grid = grid_around(self._box, radius, cfg.scan_step, bgr.shape)
-        if grid.shape[0] == 0:
-            return None
-        prob = self.model.probability(self._features(bgr, grid))
-        if cfg.still_frames:
-            moved = self._motion.moving_fraction(grid)
-            if moved is not None:
-                prob = np.where(moved >= self._still.min_fraction, prob, 0.0)
-        best = int(np.argmax(prob))
-        if prob[best] <= floor:
-            return None
-        return grid[best], float(prob[best])
+        found = self._best_box(bgr, grid, moving_only=bool(cfg.still_frames))
+        return found if found is not None and found[1] > floor else None
 
     def _scan_coast(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
         """While an occlusion is coasted, the best box within a quarter of a box of where
@@ -471,12 +461,22 @@ class SvmTracker:
         ahead = self._box.copy()
         ahead[:2] += (self._occluded + 1) * self._sure.velocity
         grid = grid_around(ahead, 0.25, cfg.scan_step, bgr.shape)
+        found = self._best_box(bgr, grid, moving_only=False)
+        return found if found is not None and found[1] >= cfg.coast_confidence else None
+
+    def _best_box(
+        self, bgr: NDArray[np.uint8], grid: FloatArray, *, moving_only: bool
+    ) -> tuple[FloatArray, float] | None:
+        """The box of `grid` the SVM scores highest, and its P (`moving_only`: of the boxes
+        in which something moved, as far as the motion map knows). None for an empty grid."""
         if grid.shape[0] == 0:
             return None
         prob = self.model.probability(self._features(bgr, grid))
+        if moving_only:
+            moved = self._motion.moving_fraction(grid)
+            if moved is not None:
+                prob = np.where(moved >= self._still.min_fraction, prob, 0.0)
         best = int(np.argmax(prob))
-        if prob[best] < cfg.coast_confidence:
-            return None
         return grid[best], float(prob[best])
 
     def _start_particles(self) -> None:
