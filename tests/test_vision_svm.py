@@ -465,6 +465,8 @@ def test_a_passer_by_half_believed_gives_way_to_the_walker_beside_him() -> None:
     # 62-94); as he comes out, walker 0 walks through where the particles wait, the SVM scores him
     # 0.4-0.8 and the cloud follows him, while walker 6, 2-3 box widths away, scores over
     # 0.85. The challenge scan takes walker 6 back; without it the box stays on walker 0.
+    # (`scan_ahead` off here: with it, seeds 0 and 1 end on walker 6 even without the
+    # challenge.)
     first, walker, passer_by = 50, 6, 0
     gt, frames = synthetic_window(0, first, 70)
     last = first + len(frames) - 1
@@ -472,7 +474,7 @@ def test_a_passer_by_half_believed_gives_way_to_the_walker_beside_him() -> None:
     for challenge_below in (0.9, 0.0):
         ends[challenge_below] = []
         for seed in range(3):
-            svm = {"challenge_below": challenge_below}
+            svm = {"challenge_below": challenge_below, "scan_ahead": False}
             result = svm_on_window(frames, gt.tracks[walker][first], seed, svm)[-1]
             on_walker = iou(result.box, gt.tracks[walker][last])
             ends[challenge_below].append((on_walker, iou(result.box, gt.tracks[passer_by][last])))
@@ -501,3 +503,28 @@ def test_the_walker_found_where_the_coast_walked_to_is_taken_back() -> None:
             ends[coast_scan].append((tracked, iou(states[-1].box, gt.tracks[walker][last])))
     assert all(tracked and on_walker > 0.4 for tracked, on_walker in ends[True]), ends
     assert not ends[False][0][0] and not ends[False][2][0], ends
+
+
+def test_a_hidden_walker_is_not_looked_for_behind_him() -> None:
+    # synthetic:9's walker 17 walks left behind an occluder (hidden over scene frames
+    # 712-745); walker 9 stands about 2.5 box widths behind him, on the right, and shared
+    # his first box. While he is hidden the cloud (seed 0) or the scan (seed 1) settled
+    # on walker 9 at P 0.3-0.5, and the box stayed there. With `scan_ahead` neither takes a
+    # box more than half a box behind where he went out of sight, and every seed is back
+    # on him when he comes out.
+    first, walker, stander = 674, 17, 9
+    gt, frames = synthetic_window(9, first, 95)
+    last = first + len(frames) - 1
+    checked = range(first + 40, last + 1, 10)
+    ends: dict[bool, list[tuple[float, float]]] = {}
+    for scan_ahead in (True, False):
+        ends[scan_ahead] = []
+        for seed in range(3):
+            svm = {"scan_ahead": scan_ahead}
+            results = svm_on_window(frames, gt.tracks[walker][first], seed, svm)
+            on_stander = max(
+                iou(results[f - first - 1].box, gt.tracks[stander][f]) for f in checked
+            )
+            ends[scan_ahead].append((iou(results[-1].box, gt.tracks[walker][last]), on_stander))
+    assert all(on_w > 0.5 and on_s == 0.0 for on_w, on_s in ends[True]), ends
+    assert all(on_w == 0.0 and on_s > 0.3 for on_w, on_s in ends[False][:2]), ends

@@ -58,6 +58,10 @@ _MIN_SIZE = 4.0
 _STILL_NEGATIVES = 20
 # LK template = the box grown by this factor (context around the target; ours).
 _LK_MARGIN = 1.3
+# SvmConfig.scan_ahead: how far behind (box widths) a hidden walker's find may lie, and the
+# slowest coast (box widths a frame) that has a heading
+_SCAN_BEHIND = 0.5
+_HEADING_MIN_SPEED = 0.02
 
 
 class Mode(StrEnum):
@@ -386,7 +390,7 @@ class SvmTracker:
         else:
             self._unsure += 1
             if cfg.scan_after and self._unsure >= cfg.scan_after:
-                found = self._scan(bgr, self._unsure, cfg.confidence)
+                found = self._scan(bgr, self._unsure, cfg.confidence, hidden_walker=True)
             ahead = self._scan_coast(bgr) if cfg.coast_scan else None
             if ahead is not None and (found is None or ahead[1] >= found[1]):
                 found = ahead
@@ -439,18 +443,41 @@ class SvmTracker:
         return self._result()
 
     def _scan(
-        self, bgr: NDArray[np.uint8], waited: int, floor: float
+        self,
+        bgr: NDArray[np.uint8],
+        waited: int,
+        floor: float,
+        *,
+        hidden_walker: bool = False,
     ) -> tuple[FloatArray, float] | None:
         """The best box of a grid around the held box, if the SVM scores it above `floor`.
 
         The grid reaches further the longer the box has been doubted (`waited` frames).
+        For a `hidden_walker`, only boxes not behind him (`_not_behind`).
         """
         cfg = self._svm_config
         growth = cfg.scan_growth * (waited - cfg.scan_after)
         radius = min(cfg.scan_max_radius, cfg.scan_radius + growth)
         grid = grid_around(self._box, radius, cfg.scan_step, bgr.shape)
+        if hidden_walker:
+            grid = grid[self._not_behind(grid)]
         found = self._best_box(bgr, grid, moving_only=bool(cfg.still_frames))
         return found if found is not None and found[1] > floor else None
+
+    def _not_behind(self, boxes: FloatArray) -> NDArray[np.bool_]:
+        """Which `boxes` lie no more than half a box behind the held box along the coast's
+        heading, while a coasted occlusion lasts and the coast moves (`SvmConfig.scan_ahead`);
+        all of them otherwise."""
+        keep = np.ones(boxes.shape[0], bool)
+        if not (self._svm_config.scan_ahead and self._coasting and self._occluded > 0):
+            return keep
+        velocity = self._sure.velocity
+        speed = float(np.hypot(*velocity))
+        if speed < _HEADING_MIN_SPEED * self._box[2]:
+            return keep
+        ahead = (boxes[:, :2] - self._box[:2]) @ (velocity / speed)
+        keep &= ahead >= -_SCAN_BEHIND * self._box[2]
+        return keep
 
     def _scan_coast(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
         """While an occlusion is coasted, the best box within a quarter of a box of where
@@ -515,6 +542,8 @@ class SvmTracker:
         # the cloud's middle; raised to a power the weights peak on the target (ours;
         # vtest.avi PF-only success AUC 0.31 -> 0.52 at 16)
         prob = self._colour.weigh(bgr, p, prob**cfg.weight_power)
+        # a hidden walker walks on: the cloud does not settle on a look-alike behind him
+        prob = np.where(self._not_behind(p), prob, 0.0)
         total = float(prob.sum())
         weights = prob / total if total > 0 else np.full(n, 1.0 / n)
         estimate: FloatArray = weights @ p
