@@ -401,10 +401,11 @@ class SvmConfig(StrictModel):
     # found on two frames running, is taken (he came out where the coast said, beyond the
     # scan's reach from where he went in). false = off.
     coast_scan: bool = True
-    # Beyond the seed: while a coasted occlusion lasts, neither the scan nor the particles
-    # take a box more than half a box behind where the target went out of sight, along the
-    # coast's heading (a hidden walker walks on; a look-alike he passed stands behind him).
-    # Only when the coast moves at least 0.02 box widths a frame. false = all round.
+    # Beyond the seed: while the target is hidden (OCCLUDED, then LOST) after a coasted
+    # occlusion began, neither the scan nor the particles take a box more than half a box
+    # behind where the target went out of sight, along the coast's heading (a hidden
+    # walker walks on; a look-alike he passed stands behind him). Only when the coast
+    # moves at least 0.02 box widths a frame. false = all round.
     scan_ahead: bool = True
 
     @model_validator(mode="after")

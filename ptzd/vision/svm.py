@@ -466,8 +466,8 @@ class SvmTracker:
 
     def _not_behind(self, boxes: FloatArray) -> NDArray[np.bool_]:
         """Which `boxes` lie no more than half a box behind the held box along the coast's
-        heading, while a coasted occlusion lasts and the coast moves (`SvmConfig.scan_ahead`);
-        all of them otherwise."""
+        heading, while the target is hidden (OCCLUDED, then LOST) after an occlusion that was
+        coasted, and the coast moves (`SvmConfig.scan_ahead`); all of them otherwise."""
         keep = np.ones(boxes.shape[0], bool)
         if not (self._svm_config.scan_ahead and self._coasting and self._occluded > 0):
             return keep
