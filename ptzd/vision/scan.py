@@ -1,4 +1,5 @@
-"""svm's local scan: a grid of boxes around the box, and the two-frame rule.
+"""svm's local scan: a grid of boxes around the box, the two-frame rule, and where a hidden
+walker may be.
 
 LK and the learned PF follow the target from where it was. When they lose it (it came out
 of an occlusion away from them, or the cloud drifted onto a passer-by the SVM half
@@ -10,9 +11,15 @@ was half a body low on legs and ground as often as on the walker.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ptzd.vision.likelihood import FloatArray
 from ptzd.vision.particle_filter import apply_homography
+
+# `not_behind`: how far behind (box widths) a hidden walker may be found, and the slowest
+# velocity (box widths a frame) that has a heading.
+_MAX_BEHIND = 0.5
+_HEADING_MIN_SPEED = 0.02
 
 
 def grid_around(box: FloatArray, radius: float, step: float, shape: tuple[int, ...]) -> FloatArray:
@@ -25,6 +32,21 @@ def grid_around(box: FloatArray, radius: float, step: float, shape: tuple[int, .
     keep = (gx >= 0) & (gx < shape[1]) & (gy >= 0) & (gy < shape[0])
     n = int(keep.sum())
     return np.column_stack([gx[keep], gy[keep], np.full(n, w), np.full(n, h)])
+
+
+def not_behind(
+    boxes: FloatArray, origin: FloatArray, velocity: FloatArray, width: float
+) -> NDArray[np.bool_]:
+    """Which `boxes` (cx, cy, w, h) lie no more than half a box `width` behind `origin`
+    along `velocity`'s heading: where a walker hidden at `origin` may be by now. A hidden
+    walker walks on; what he walked past stands behind him. All of them for a velocity
+    under 0.02 box widths a frame, too slow to have a heading (a walker who had stopped)."""
+    speed = float(np.hypot(*velocity))
+    if speed < _HEADING_MIN_SPEED * width:
+        return np.ones(boxes.shape[0], bool)
+    ahead = (boxes[:, :2] - origin[:2]) @ (velocity / speed)
+    keep: NDArray[np.bool_] = ahead >= -_MAX_BEHIND * width
+    return keep
 
 
 class FoundTwice:

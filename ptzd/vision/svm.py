@@ -49,7 +49,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.rf import sample_negatives
-from ptzd.vision.scan import FoundTwice, grid_around
+from ptzd.vision.scan import FoundTwice, grid_around, not_behind
 from ptzd.vision.stillness import MotionMap, StillCounter, camera_still
 from ptzd.vision.tracking import Box, TrackResult, TrackState, centre_box
 
@@ -58,10 +58,6 @@ _MIN_SIZE = 4.0
 _STILL_NEGATIVES = 20
 # LK template = the box grown by this factor (context around the target; ours).
 _LK_MARGIN = 1.3
-# SvmConfig.scan_ahead: how far behind (box widths) a hidden walker's find may lie, and the
-# slowest coast (box widths a frame) that has a heading
-_SCAN_BEHIND = 0.5
-_HEADING_MIN_SPEED = 0.02
 
 
 class Mode(StrEnum):
@@ -468,16 +464,9 @@ class SvmTracker:
         """Which `boxes` lie no more than half a box behind the held box along the coast's
         heading, while the target is hidden (OCCLUDED, then LOST) after an occlusion that was
         coasted, and the coast moves (`SvmConfig.scan_ahead`); all of them otherwise."""
-        keep = np.ones(boxes.shape[0], bool)
         if not (self._svm_config.scan_ahead and self._coasting and self._occluded > 0):
-            return keep
-        velocity = self._sure.velocity
-        speed = float(np.hypot(*velocity))
-        if speed < _HEADING_MIN_SPEED * self._box[2]:
-            return keep
-        ahead = (boxes[:, :2] - self._box[:2]) @ (velocity / speed)
-        keep &= ahead >= -_SCAN_BEHIND * self._box[2]
-        return keep
+            return np.ones(boxes.shape[0], bool)
+        return not_behind(boxes, self._box, self._sure.velocity, float(self._box[2]))
 
     def _scan_coast(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
         """While an occlusion is coasted, the best box within a quarter of a box of where
