@@ -507,11 +507,12 @@ def test_the_walker_found_where_the_coast_walked_to_is_taken_back() -> None:
 
 def test_a_hidden_walker_is_not_looked_for_behind_him() -> None:
     # synthetic:9's walker 17 walks left behind an occluder (under 10 % visible over scene
-    # frames 712-742); walker 9 stands about 2.5 box widths behind him, on the right, and
-    # overlapped his first box. While he was hidden the cloud (seed 0, P 0.3-0.5) or the
-    # scan (seed 1, P 0.55-0.74, in an earlier brief occlusion) settled on walker 9, and the
-    # box stayed there. With `scan_ahead` neither takes a box more than half a box behind
-    # where he went out of sight, and every seed is back on him when he comes out.
+    # frames 712-742); walker 9 stands behind him, on the right, about 1.6 box widths from
+    # where he went out of sight, and overlapped his first box. While he was hidden the
+    # cloud (seed 0, P 0.3-0.5) or the scan (seed 1, P 0.55-0.74, in an earlier brief
+    # occlusion) settled on walker 9, and the box stayed there. With `scan_ahead` neither
+    # takes a box more than half a box behind where he went out of sight, and every seed is
+    # back on him when he comes out.
     first, walker, stander = 674, 17, 9
     gt, frames = synthetic_window(9, first, 95)
     last = first + len(frames) - 1
