@@ -325,8 +325,9 @@ def test_the_scan_finds_the_walker_where_he_comes_out(seed: int) -> None:
     scene = Scene(velocity=(2.0, 0.0), start=(40.0, 90.0, 24.0, 60.0), occluder_x=(120, 180))
     ends = {}
     for scan_after in (3, 0):
-        # (held, not coasted: the report shows where the search waits)
-        svm = {"scan_after": scan_after, "coast": False}
+        # (held, not coasted: the report shows where the search waits; the colour
+        # re-acquisition off, or it finds him without the scan)
+        svm = {"scan_after": scan_after, "coast": False, "colour_reacquire": False}
         config = TrackerConfig(kind="svm", seed=seed, svm=svm)
         tracker = SvmTracker(config)
         tracker.init(scene.frame(0), scene.truth(0))
@@ -342,7 +343,12 @@ def test_a_still_look_alike_is_let_go_and_the_walker_found() -> None:
     # a walker leaving a still figure in his colours where he started: LK and the SVM stay
     # on the figure; the still rule lets go of it and the scan finds him (it takes only
     # boxes in which something moved, or it would find the figure again)
-    variants = {"shipped": {}, "no still rule": {"still_frames": 0}, "no scan": {"scan_after": 0}}
+    # ("no scan": nor the colour re-acquisition, which finds him too once LOST)
+    variants = {
+        "shipped": {},
+        "no still rule": {"still_frames": 0},
+        "no scan": {"scan_after": 0, "colour_reacquire": False},
+    }
     outcome = twin_outcomes(1.5, 80, "svm", variants, seeds=3)
     assert all(s is TrackState.TRACKING and w > 0.6 for s, w, _ in outcome["shipped"])
     assert all(s is TrackState.TRACKING and t > 0.6 for s, _, t in outcome["no still rule"])
@@ -529,3 +535,25 @@ def test_a_hidden_walker_is_not_looked_for_behind_him() -> None:
             ends[scan_ahead].append((iou(results[-1].box, gt.tracks[walker][last]), on_stander))
     assert all(on_w > 0.5 and on_s == 0.0 for on_w, on_s in ends[True]), ends
     assert all(on_w == 0.0 and on_s > 0.3 for on_w, on_s in ends[False][:2]), ends
+
+
+def test_a_lost_walker_the_colour_model_knows_is_taken_back() -> None:
+    # synthetic:14's walker 7 (green shirt) is hidden behind a column over scene frames
+    # 159-189 and the track goes LOST at 190. He comes out in front of a dark hedge, having
+    # gone in on light grass: the SVM scores him mostly under 0.4, the colour vote's model
+    # 0.78-0.96 (tracker seed 0). With `colour_reacquire` he is found and taken back four
+    # frames later and tracked on; without it the track stays LOST.
+    first, walker = 90, 7
+    gt, frames = synthetic_window(14, first, 125)
+    last = first + len(frames) - 1
+    ends: dict[bool, list[TrackResult]] = {}
+    for colour_reacquire in (True, False):
+        results = svm_on_window(
+            frames, gt.tracks[walker][first], 0, {"colour_reacquire": colour_reacquire}
+        )
+        ends[colour_reacquire] = results[200 - first - 1 :]
+    assert all(
+        r.state is TrackState.TRACKING and iou(r.box, gt.tracks[walker][f]) > 0.5
+        for f, r in zip(range(200, last + 1), ends[True], strict=True)
+    )
+    assert all(r.state is TrackState.LOST for r in ends[False])

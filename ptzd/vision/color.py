@@ -550,6 +550,11 @@ class ColourVote:
         weighted: FloatArray = weights * np.exp(self._weight * (log - log.max()))
         return weighted
 
+    def best(self, frame: Frame, boxes: FloatArray) -> tuple[int, float]:
+        """The row of `boxes` (non-empty) the colour model likes best, and its similarity."""
+        best = int(np.argmax(self._likelihood.log_likelihood(frame, boxes)))
+        return best, self._likelihood.similarity(frame, boxes[best])
+
     def agrees(self, frame: Frame, box: FloatArray, threshold: float) -> bool:
         """The colour model's similarity at `box` is at least `threshold` (True when off)."""
         return not self.active or self._likelihood.similarity(frame, box) >= threshold

@@ -407,6 +407,12 @@ class SvmConfig(StrictModel):
     # walker walks on; a look-alike he passed stands behind him). Only when the coast
     # moves at least 0.02 box widths a frame. false = all round.
     scan_ahead: bool = True
+    # Beyond the seed: while LOST, on colour frames, the box of the scan's widest grid (not
+    # behind him, something moved in it) the colour vote's model likes best is found if it
+    # scores occlusion.reacquire_threshold; found on two frames running it is taken and
+    # the SVM retrained on it (a walker back in front of another background, whom the SVM
+    # no longer knows). false = off.
+    colour_reacquire: bool = True
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

@@ -390,9 +390,18 @@ class SvmTracker:
             ahead = self._scan_coast(bgr) if cfg.coast_scan else None
             if ahead is not None and (found is None or ahead[1] >= found[1]):
                 found = ahead
+            if found is None and cfg.colour_reacquire and self._state is TrackState.LOST:
+                found = self._colour_find(bgr)
         taken = self._finds.offer(None if found is None else found[0])
         if taken and found is not None:
             box, confidence = found
+            if confidence < cfg.confidence:
+                # a colour find the SVM does not believe: teach it, as at init
+                near = self._jitter(box, cfg.retrain_after - 1, 0.05, 0.03)
+                self.positives.extend(self._features(bgr, np.vstack([box[None], near])))
+                self._box = box
+                self._retrain(bgr)
+                confidence = float(self.model.probability(self._features(bgr, box[None]))[0])
             jumped = True
             if confidence >= cfg.challenge_below:
                 self._weak = 0  # (a find it half believes is no end to the doubt)
@@ -459,6 +468,26 @@ class SvmTracker:
             grid = grid[self._not_behind(grid)]
         found = self._best_box(bgr, grid, moving_only=bool(cfg.still_frames))
         return found if found is not None and found[1] > floor else None
+
+    def _colour_find(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
+        """While LOST: the box of the widest scan grid, in which something moved, that the
+        colour vote's model likes best, with its SVM P, if its colour similarity reaches
+        `occlusion.reacquire_threshold` (`SvmConfig.colour_reacquire`)."""
+        if not self._colour.active:
+            return None
+        cfg = self._svm_config
+        grid = grid_around(self._box, cfg.scan_max_radius, cfg.scan_step, bgr.shape)
+        grid = grid[self._not_behind(grid)]
+        moved = self._motion.moving_fraction(grid)
+        if moved is not None:
+            grid = grid[moved >= self._still.min_fraction]
+        if grid.shape[0] == 0:
+            return None
+        best, similarity = self._colour.best(bgr, grid)
+        if similarity < self._config.occlusion.reacquire_threshold:
+            return None
+        box = grid[best]
+        return box, float(self.model.probability(self._features(bgr, box[None]))[0])
 
     def _not_behind(self, boxes: FloatArray) -> NDArray[np.bool_]:
         """Which `boxes` lie no more than half a box behind the held box along the coast's
