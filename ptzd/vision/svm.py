@@ -19,11 +19,13 @@ taken (`SvmConfig.scan_after`; ptzd/vision/scan.py); a confident box it is not s
 challenged by the same grid and gives way to a box there it scores well above it, found on
 two frames running (`challenge_below`: the cloud drifted onto a passer-by); while an
 occlusion is coasted, a box the SVM is sure of where the coast has walked to is taken too
-(`coast_scan`); and a box in which nothing moved for `SvmConfig.still_frames` frames counts
-as occluded, the scan then taking only boxes in which something moved
-(ptzd/vision/stillness.py); that box becomes a negative of every retraining after
-(`still_negatives`). On a grey scene (thermal, night) the colour histogram's 27 bins hold
-grey levels (`grey_levels`).
+(`coast_scan`); while the walker is hidden, nothing behind where he went out of sight is
+taken (`scan_ahead`); while LOST, a box the colour vote's model recognises is taken and the
+SVM retrained on it (`colour_reacquire`); and a box in which nothing moved for
+`SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
+which something moved (ptzd/vision/stillness.py); that box becomes a negative of every
+retraining after (`still_negatives`). On a grey scene (thermal, night) the colour
+histogram's 27 bins hold grey levels (`grey_levels`).
 """
 
 from __future__ import annotations
@@ -294,9 +296,7 @@ class SvmTracker:
         self._grey = cfg.grey_levels and not is_colour(frame, self._box)
         bgr = to_bgr(frame)
         # seed Fig. 3: positives are the boxes closest to the init box
-        near = self._jitter(self._box, cfg.positives - 1, 0.05, 0.03)
-        pos = self._features(bgr, np.vstack([self._box[None], near]))
-        self.positives = deque(pos, maxlen=cfg.positives)
+        self.positives = deque(self._positives_at(bgr, self._box, cfg.positives), cfg.positives)
         self.still_negatives.clear()
         self._retrain(bgr)
         self.retrains = 0
@@ -315,6 +315,11 @@ class SvmTracker:
         self._motion.reset(frame)
         self._still.reset()
         self._initialised = True
+
+    def _positives_at(self, bgr: NDArray[np.uint8], box: FloatArray, count: int) -> FloatArray:
+        """Features of `box` and `count` - 1 boxes closest to it (seed Fig. 3's positives)."""
+        near = self._jitter(box, count - 1, 0.05, 0.03)
+        return self._features(bgr, np.vstack([box[None], near]))
 
     def _jitter(self, box: FloatArray, count: int, shift: float, scale: float) -> FloatArray:
         noise = self._rng.standard_normal((count, 3))
@@ -397,8 +402,7 @@ class SvmTracker:
             box, confidence = found
             if confidence < cfg.confidence:
                 # a colour find the SVM does not believe: teach it, as at init
-                near = self._jitter(box, cfg.retrain_after - 1, 0.05, 0.03)
-                self.positives.extend(self._features(bgr, np.vstack([box[None], near])))
+                self.positives.extend(self._positives_at(bgr, box, cfg.retrain_after))
                 self._box = box
                 self._retrain(bgr)
                 confidence = float(self.model.probability(self._features(bgr, box[None]))[0])
@@ -477,10 +481,7 @@ class SvmTracker:
             return None
         cfg = self._svm_config
         grid = grid_around(self._box, cfg.scan_max_radius, cfg.scan_step, bgr.shape)
-        grid = grid[self._not_behind(grid)]
-        moved = self._motion.moving_fraction(grid)
-        if moved is not None:
-            grid = grid[moved >= self._still.min_fraction]
+        grid = grid[self._not_behind(grid) & self._moving(grid)]
         if grid.shape[0] == 0:
             return None
         best, similarity = self._colour.best(bgr, grid)
@@ -488,6 +489,15 @@ class SvmTracker:
             return None
         box = grid[best]
         return box, float(self.model.probability(self._features(bgr, box[None]))[0])
+
+    def _moving(self, boxes: FloatArray) -> NDArray[np.bool_]:
+        """Which `boxes` something moved in, as far as the motion map knows (all of them
+        before it knows anything)."""
+        moved = self._motion.moving_fraction(boxes)
+        if moved is None:
+            return np.ones(boxes.shape[0], bool)
+        moving: NDArray[np.bool_] = moved >= self._still.min_fraction
+        return moving
 
     def _not_behind(self, boxes: FloatArray) -> NDArray[np.bool_]:
         """Which `boxes` lie no more than half a box behind the held box along the coast's
@@ -518,9 +528,7 @@ class SvmTracker:
             return None
         prob = self.model.probability(self._features(bgr, grid))
         if moving_only:
-            moved = self._motion.moving_fraction(grid)
-            if moved is not None:
-                prob = np.where(moved >= self._still.min_fraction, prob, 0.0)
+            prob = np.where(self._moving(grid), prob, 0.0)
         best = int(np.argmax(prob))
         return grid[best], float(prob[best])
 
