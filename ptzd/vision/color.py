@@ -555,9 +555,13 @@ class ColourVote:
         best = int(np.argmax(self._likelihood.log_likelihood(frame, boxes)))
         return best, self._likelihood.similarity(frame, boxes[best])
 
+    def similarity(self, frame: Frame, box: FloatArray) -> float:
+        """The colour model's similarity at centre-form `box` (1.0 when off)."""
+        return self._likelihood.similarity(frame, box) if self.active else 1.0
+
     def agrees(self, frame: Frame, box: FloatArray, threshold: float) -> bool:
         """The colour model's similarity at `box` is at least `threshold` (True when off)."""
-        return not self.active or self._likelihood.similarity(frame, box) >= threshold
+        return self.similarity(frame, box) >= threshold
 
     def adapt(self, frame: Frame, box: FloatArray) -> None:
         if self.active:

@@ -413,6 +413,17 @@ class SvmConfig(StrictModel):
     # the SVM retrained on it (a walker back in front of another background, whom the SVM
     # no longer knows). false = off.
     colour_reacquire: bool = True
+    # Beyond the seed: on colour frames, a box the SVM is sure of that the colour vote's
+    # model scores under occlusion.similarity_threshold for scan_after frames in a row
+    # gives way to the box within colour_challenge_radius box widths, in which something
+    # moved, that the model recognises (occlusion.reacquire_threshold and at least
+    # colour_challenge_margin above the held box) and the SVM believes (P over
+    # confidence), found on two frames running: the 27-bin RGB histogram cannot tell a
+    # white shirt over black trousers from one over dark green, the colour model can
+    # (a passer-by who crossed in front). false = off.
+    colour_challenge: bool = True
+    colour_challenge_radius: float = Field(default=2.0, ge=0.0, le=20.0)
+    colour_challenge_margin: float = Field(default=0.2, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _occlusion_below_confidence(self) -> SvmConfig:

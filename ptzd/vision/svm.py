@@ -275,6 +275,7 @@ class SvmTracker:
         self._unsure = 0  # frames in a row without a confident box
         self._weak = 0  # frames in a row with a box under `challenge_below`
         self._finds = FoundTwice()  # the scan's finds
+        self._off_colour = 0  # confident frames in a row the colour vote calls someone else
         self._grey = False  # features from grey levels (SvmConfig.grey_levels)
         self._initialised = False
 
@@ -312,6 +313,7 @@ class SvmTracker:
         self._unsure = 0
         self._weak = 0
         self._finds.clear()
+        self._off_colour = 0
         self._motion.reset(frame)
         self._still.reset()
         self._initialised = True
@@ -388,15 +390,18 @@ class SvmTracker:
                 # a box the SVM only half believes (a passer-by the cloud drifted onto)
                 # gives way to one near it that it believes far more
                 found = self._scan(bgr, self._weak, confidence + cfg.challenge_margin)
+            if found is None:
+                found = self._colour_challenge(bgr, box)
         else:
             self._unsure += 1
+            self._off_colour = 0
             if cfg.scan_after and self._unsure >= cfg.scan_after:
                 found = self._scan(bgr, self._unsure, cfg.confidence, hidden_walker=True)
             ahead = self._scan_coast(bgr) if cfg.coast_scan else None
             if ahead is not None and (found is None or ahead[1] >= found[1]):
                 found = ahead
             if found is None and cfg.colour_reacquire and self._state is TrackState.LOST:
-                found = self._colour_find(bgr)
+                found = self._colour_find(bgr, cfg.scan_max_radius)
         taken = self._finds.offer(None if found is None else found[0])
         if taken and found is not None:
             box, confidence = found
@@ -473,22 +478,44 @@ class SvmTracker:
         found = self._best_box(bgr, grid, moving_only=bool(cfg.still_frames))
         return found if found is not None and found[1] > floor else None
 
-    def _colour_find(self, bgr: NDArray[np.uint8]) -> tuple[FloatArray, float] | None:
-        """While LOST: the box of the widest scan grid, in which something moved, that the
-        colour vote's model likes best, with its SVM P, if its colour similarity reaches
-        `occlusion.reacquire_threshold` (`SvmConfig.colour_reacquire`)."""
+    def _colour_find(
+        self, bgr: NDArray[np.uint8], radius: float, floor: float = 0.0
+    ) -> tuple[FloatArray, float] | None:
+        """The box of a scan grid `radius` box widths round the held box, in which
+        something moved (and not behind a hidden walker), that the colour vote's model
+        likes best, with its SVM P, if its colour similarity reaches
+        `occlusion.reacquire_threshold` and `floor`."""
         if not self._colour.active:
             return None
-        cfg = self._svm_config
-        grid = grid_around(self._box, cfg.scan_max_radius, cfg.scan_step, bgr.shape)
+        grid = grid_around(self._box, radius, self._svm_config.scan_step, bgr.shape)
         grid = grid[self._not_behind(grid) & self._moving(grid)]
         if grid.shape[0] == 0:
             return None
         best, similarity = self._colour.best(bgr, grid)
-        if similarity < self._config.occlusion.reacquire_threshold:
+        if similarity < max(self._config.occlusion.reacquire_threshold, floor):
             return None
         box = grid[best]
         return box, float(self.model.probability(self._features(bgr, box[None]))[0])
+
+    def _colour_challenge(
+        self, bgr: NDArray[np.uint8], box: FloatArray
+    ) -> tuple[FloatArray, float] | None:
+        """A box the SVM is sure of that the colour vote's model has called someone else
+        (under `occlusion.similarity_threshold`) for `scan_after` frames in a row gives way
+        to the box near it the model recognises (`SvmConfig.colour_challenge`): at least
+        `occlusion.reacquire_threshold` and `colour_challenge_margin` above the held box,
+        and one the SVM believes too (P over `confidence`)."""
+        cfg = self._svm_config
+        if not (cfg.colour_challenge and self._colour.active):
+            return None
+        similarity = self._colour.similarity(bgr, box)
+        below = similarity < self._config.occlusion.similarity_threshold
+        self._off_colour = self._off_colour + 1 if below else 0
+        if not cfg.scan_after or self._off_colour < cfg.scan_after:
+            return None
+        floor = similarity + cfg.colour_challenge_margin
+        found = self._colour_find(bgr, cfg.colour_challenge_radius, floor)
+        return found if found is not None and found[1] > cfg.confidence else None
 
     def _moving(self, boxes: FloatArray) -> NDArray[np.bool_]:
         """Which `boxes` something moved in, as far as the motion map knows (all of them
