@@ -304,7 +304,8 @@ def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
     # synthetic:3's walker 13 goes behind a column 5 frames after a fair start (scene frame
     # 340) and is out again 30 frames later; the memory learns every tracked frame until it
     # holds 15 positives, so without the motion rule the forests learn the column while the
-    # box waits on it, and score the walker low once he is back
+    # box waits on it, and score the walker low once he is back (the colour rules off: the
+    # veto alone keeps the column out too, P 0.53-0.58)
     first, walker = 340, 13
     gt, frames = synthetic_window(3, first, 60)
     back = [i for i in range(40, 60) if gt.visibility[walker][first + i] >= 0.9]
@@ -313,7 +314,9 @@ def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
     for rule in (True, False):
         mean_p[rule] = []
         for seed in range(3):
-            tracker = _rf(seed, learn_needs_motion=rule, learn_needs_colour=False)
+            tracker = _rf(
+                seed, learn_needs_motion=rule, learn_needs_colour=False, colour_veto=False
+            )
             tracker.init(frames[0], gt.tracks[walker][first])
             scores = []
             for i in range(1, 60):
@@ -327,7 +330,8 @@ def test_the_forests_do_not_learn_the_column_a_walker_went_behind() -> None:
 
 def test_the_forests_do_not_learn_a_van_passing_in_front() -> None:
     # a blue van passes in front of the walker while the memory is still filling; it moves,
-    # so only the colour model can tell the box is not him
+    # so only the colour model can tell the box is not him (the veto off: it makes those
+    # frames full occlusions, which learn nothing either)
     scene = Scene(velocity=(1.0, 0.0), start=(60.0, 90.0, 24.0, 60.0))
     frames, covered = [], []
     for t in range(30):
@@ -343,7 +347,7 @@ def test_the_forests_do_not_learn_a_van_passing_in_front() -> None:
     for rule in (True, False):
         learned[rule] = []
         for seed in range(3):
-            tracker = _rf(seed, learn_needs_colour=rule)
+            tracker = _rf(seed, learn_needs_colour=rule, colour_veto=False)
             tracker.init(frames[0], scene.truth(0))
             count = 0
             for t in range(1, 30):
@@ -353,3 +357,51 @@ def test_the_forests_do_not_learn_a_van_passing_in_front() -> None:
             learned[rule].append(count)
     assert learned[True] == [0, 0, 0]
     assert min(learned[False]) >= 5, learned
+
+
+def test_what_the_colour_model_rejects_is_coasted_not_followed() -> None:
+    # synthetic:23's walker 12 walks left behind an occluder (under half visible over scene
+    # frames 784-834). The grey-level forests score what the box holds there 0.5-0.7 (a
+    # partial occlusion), so without the colour veto the box stays on it while he walks
+    # on, and is nowhere near him when he comes out; the colour model scores that box
+    # under 0.6, and with the veto the box coasts and he is taken back (every tracker
+    # seed, scene frames 843-852).
+    first, walker = 773, 12
+    gt, frames = synthetic_window(23, first, 80)
+    ends: dict[bool, list[float]] = {True: [], False: []}
+    for veto in (True, False):
+        for seed in range(3):
+            tracker = _rf(seed, colour_veto=veto)
+            tracker.init(frames[0], gt.tracks[walker][first])
+            results = [tracker.update(frame) for frame in frames[1:]]
+            ends[veto].append(
+                min(
+                    iou(r.box, gt.tracks[walker][first + i])
+                    for i, r in enumerate(results, start=1)
+                    if i >= 70
+                )
+            )
+    assert min(ends[True]) > 0.5, ends
+    assert max(ends[False]) == 0.0, ends
+
+
+def test_a_lost_track_the_colour_model_recognises_resumes() -> None:
+    # synthetic:2's walker 0: the track is terminated (LOST) while he is hidden, around
+    # scene frame 125; from frame 130 the box is back on him, but the forests score him
+    # 0.4-0.55, a partial occlusion, never the learning grade that resumes a LOST track.
+    # The colour model scores him 0.83-0.90 there, and with `colour_resume` the track is
+    # TRACKING again; without it, it stays LOST with its box on him.
+    gt, frames = synthetic_window(2, 0, 141)
+    states: dict[bool, list[tuple[TrackState, float]]] = {}
+    for resume in (True, False):
+        tracker = _rf(0, colour_resume=resume)
+        tracker.init(frames[0], gt.tracks[0][0])
+        results = [tracker.update(frame) for frame in frames[1:]]
+        states[resume] = [
+            (r.state, iou(r.box, gt.tracks[0][i]))
+            for i, r in enumerate(results, start=1)
+            if i >= 130
+        ]
+    assert all(s is TrackState.TRACKING for s, _ in states[True]), states[True]
+    assert all(s is TrackState.LOST for s, _ in states[False]), states[False]
+    assert min(j for _, j in states[False]) > 0.5, states[False]

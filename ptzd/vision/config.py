@@ -287,6 +287,15 @@ class RfConfig(StrictModel):
     # tracker's likelihood (`tracker.color`) to this power; its model learns on learning
     # frames. 0 = off (the seed's grey-level forests alone). Off on grey frames.
     colour_weight: float = Field(default=0.5, ge=0.0, le=10.0)
+    # Beyond the seed, on colour frames: a learning or partial-occlusion estimate the colour
+    # model scores under `occlusion.similarity_threshold` is a full occlusion, and the box
+    # coasts (the grey-level forests score an occluder's edge, or a passer-by of the
+    # walker's grey level, 0.5-0.7, and the box stayed on it); and a terminated (LOST) track
+    # resumes on a partial-occlusion estimate the colour model scores at
+    # `occlusion.reacquire_threshold` (otherwise only a learning frame, P over U_max,
+    # resumes it). False = the seed's branches alone.
+    colour_veto: bool = True
+    colour_resume: bool = True
 
     @model_validator(mode="after")
     def _memory_fits(self) -> RfConfig:

@@ -22,7 +22,10 @@ towards boxes in which something moved (`RfConfig.motion_floor`), and a box in w
 nothing moved for `RfConfig.still_frames` frames is a full occlusion: forests that learned
 the occluder a walker went behind otherwise keep scoring it above U_min for good. And so
 that they learn it less, a box in which nothing moved this frame is not learned, nor, on
-colour frames, one the colour model calls occluded (ptzd/vision/learning.py).
+colour frames, one the colour model calls occluded (ptzd/vision/learning.py). On colour
+frames the colour model also vetoes: an estimate it calls occluded is a full occlusion
+whatever the forests say, and one it recognises resumes a terminated track
+(`RfConfig.colour_veto`, `colour_resume`).
 
 U_max = min(0.72, alpha / ln sigma^2), sigma^2 the intensity variance of the target box,
 U_min = U_max - 0.4 (eqs. 21-22). Prediction is the second-order autoregressive model of
@@ -321,6 +324,11 @@ class RfTracker:
             Branch.PARTIAL_OCCLUSION,
         ):
             branch = Branch.FULL_OCCLUSION  # on something that does not move: not the target
+        occlusion = self._config.occlusion
+        colour = self._colour.similarity(frame, estimate)  # 1.0 on grey frames
+        followed = branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION
+        if followed and self._rf_config.colour_veto and colour < occlusion.similarity_threshold:
+            branch = Branch.FULL_OCCLUSION  # what the forests took is not in his colours
         self.branch = branch
         self._confidence = p_t
         self._sure.update(estimate, sure=branch is Branch.LEARN)
@@ -339,8 +347,14 @@ class RfTracker:
                 self._colour.adapt(frame, self._box)
             self._resample(probs, top)
             self.occluded_frames = 0
-            # a learning-grade frame resumes a terminated track (beyond the seed)
-            if self._state is not TrackState.LOST or branch is Branch.LEARN:
+            # a learning-grade frame resumes a terminated track (beyond the seed), and so
+            # does one the colour model recognises
+            recognised = (
+                self._rf_config.colour_resume
+                and self._colour.active
+                and colour >= occlusion.reacquire_threshold
+            )
+            if self._state is not TrackState.LOST or branch is Branch.LEARN or recognised:
                 self._state = TrackState.TRACKING
         else:
             # 2.4 / 3: previous forests, particles and box
