@@ -21,7 +21,9 @@ two frames running (`challenge_below`: the cloud drifted onto a passer-by); whil
 occlusion is coasted, a box the SVM is sure of where the coast has walked to is taken too
 (`coast_scan`); while the walker is hidden, nothing behind where he went out of sight is
 taken (`scan_ahead`); while LOST, a box the colour vote's model recognises is taken and the
-SVM retrained on it (`colour_reacquire`); and a box in which nothing moved for
+SVM retrained on it (`colour_reacquire`); a confident box the colour vote's model calls
+someone else gives way to a box near it the model recognises (`colour_challenge`: a
+passer-by the 27-bin histogram cannot tell apart); and a box in which nothing moved for
 `SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
 which something moved (ptzd/vision/stillness.py); that box becomes a negative of every
 retraining after (`still_negatives`). On a grey scene (thermal, night) the colour
