@@ -325,10 +325,11 @@ class RfTracker:
         ):
             branch = Branch.FULL_OCCLUSION  # on something that does not move: not the target
         occlusion = self._config.occlusion
-        colour = self._colour.similarity(frame, estimate)  # 1.0 on grey frames
-        followed = branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION
-        if followed and self._rf_config.colour_veto and colour < occlusion.similarity_threshold:
-            branch = Branch.FULL_OCCLUSION  # what the forests took is not in his colours
+        colour = 1.0  # the colour model's similarity at the estimate, asked if it is followed
+        if branch is Branch.LEARN or branch is Branch.PARTIAL_OCCLUSION:
+            colour = self._colour.similarity(frame, estimate)  # 1.0 on grey frames
+            if self._rf_config.colour_veto and colour < occlusion.similarity_threshold:
+                branch = Branch.FULL_OCCLUSION  # what the forests took is not in his colours
         self.branch = branch
         self._confidence = p_t
         self._sure.update(estimate, sure=branch is Branch.LEARN)
