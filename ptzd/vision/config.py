@@ -338,6 +338,11 @@ class SvmConfig(StrictModel):
     weight_power: float = Field(default=16.0, ge=1.0, le=100.0)
     # Below this confidence the target counts as occluded (ours).
     occluded_below: float = Field(default=0.3, ge=0.0, le=1.0)
+    # Beyond the seed: once occluded, the target is back only on a box scored at h2
+    # (`confidence`) or found by a scan, not on one just over `occluded_below`. While he is
+    # hidden the PF's cloud wanders, and a box it settles on at P 0.3-0.5 took the track
+    # away from where he came back (docs/tracking.md). false = `occluded_below` both ways.
+    occlusion_hysteresis: bool = True
     max_occluded: int = Field(default=30, ge=1, le=10_000)
     # LK template at most this many pixels on its longer side; iterations per frame (ours).
     template_size: int = Field(default=32, ge=8, le=256)

@@ -23,7 +23,9 @@ occlusion is coasted, a box the SVM is sure of where the coast has walked to is 
 taken (`scan_ahead`); while LOST, a box the colour vote's model recognises is taken and the
 SVM retrained on it (`colour_reacquire`); a confident box the colour vote's model calls
 someone else gives way to a box near it the model recognises (`colour_challenge`: a
-passer-by the 27-bin histogram cannot tell apart); and a box in which nothing moved for
+passer-by the 27-bin histogram cannot tell apart); once the target is occluded, only a
+box the SVM is confident of (P of h2 or more) or a scan's find ends it (`occlusion_hysteresis`:
+the PF's cloud wanders while he is hidden); and a box in which nothing moved for
 `SvmConfig.still_frames` frames counts as occluded, the scan then taking only boxes in
 which something moved (ptzd/vision/stillness.py); that box becomes a negative of every
 retraining after (`still_negatives`). On a grey scene (thermal, night) the colour
@@ -428,7 +430,10 @@ class SvmTracker:
             # a look-alike, or lagging the walker) must not steer the particles
             a = VELOCITY_SMOOTHING
             self._velocity = (1 - a) * self._velocity + a * (box[:2] - self._box[:2])
-        if confidence >= cfg.occluded_below:
+        back = cfg.occluded_below
+        if cfg.occlusion_hysteresis and self._occluded and not jumped:
+            back = max(back, cfg.confidence)  # hidden: only a confident box ends it
+        if confidence >= back:
             self._box = box
             self._occluded = 0
             self._state = TrackState.TRACKING
