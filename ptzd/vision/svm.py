@@ -430,10 +430,10 @@ class SvmTracker:
             # a look-alike, or lagging the walker) must not steer the particles
             a = VELOCITY_SMOOTHING
             self._velocity = (1 - a) * self._velocity + a * (box[:2] - self._box[:2])
-        back = cfg.occluded_below
+        tracked_from = cfg.occluded_below
         if cfg.occlusion_hysteresis and self._occluded and not jumped:
-            back = max(back, cfg.confidence)  # hidden: only a confident box ends it
-        if confidence >= back:
+            tracked_from = cfg.confidence  # hidden: only a confident box (h2) ends it
+        if confidence >= tracked_from:
             self._box = box
             self._occluded = 0
             self._state = TrackState.TRACKING
