@@ -19,7 +19,8 @@ Every tracker starts from the ground-truth box of a sequence's first frame and i
 the other frames with ground truth (ptzd.metrics: OTB success AUC, precision at 20 px, lost
 frames). Frames are decoded/rendered before tracking, so the frames/s column is tracking only.
 The speed section times each tracker on vtest frames (768x576), ptzd with N = 100 and with its
-default N, pinned to one core, the median of `--repeats` runs.
+default N (also with soft value bins, `color.value_blend = 0.5`, for what they cost), pinned
+to one core, the median of `--repeats` runs.
 
 Prints a table, writes bench/results/track.json and bench/results/track_success.png.
 The machine is shared (2 cores, other work running): frame rates are noisy; compare the
@@ -320,13 +321,22 @@ class BenchTracker(Protocol):
 class PtzdTracker:
     """ptzd's tracker through its Python API; LOST counts as null (as `ptzd track` writes)."""
 
-    def __init__(self, name: str, particles: int | None, seed: int, use_ego: bool) -> None:
-        from ptzd.vision.config import TrackerConfig
+    def __init__(
+        self,
+        name: str,
+        particles: int | None,
+        seed: int,
+        use_ego: bool,
+        color: dict[str, Any] | None = None,
+    ) -> None:
+        from ptzd.vision.config import ColorConfig, TrackerConfig
 
         self.name = name
         overrides: dict[str, Any] = {"kind": "color", "seed": seed}  # the colour filter
         if particles is not None:
             overrides["num_particles"] = particles
+        if color is not None:
+            overrides["color"] = ColorConfig(**color)
         self.config = TrackerConfig(**overrides)
         self.use_ego = use_ego
         self._tracker: Any = None
@@ -454,6 +464,13 @@ def speed_test(
                 entries.append(
                     (f"ptzd N={n_default}", lambda: PtzdTracker("ptzd", None, seed, True))
                 )
+            # soft value bins (off by default), for what they cost
+            entries.append(
+                (
+                    f"ptzd N={n_default} soft bins",
+                    lambda: PtzdTracker("ptzd", None, seed, True, color={"value_blend": 0.5}),
+                )
+            )
         elif name in PEERS:
             entries.append((name, lambda name=name: OpenCVTracker(name)))  # type: ignore[misc]
     out: dict[str, dict[str, Any]] = {}

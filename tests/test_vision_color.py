@@ -37,29 +37,49 @@ def _slow_histograms(frame, boxes, config: ColorConfig, parts: int):
             for c, u in enumerate(grid.u):
                 x = int(np.floor(cx + w * u))
                 y = int(np.floor(cy + h * v))
-                if 0 <= x < width and 0 <= y < height:
-                    pixel = frame[y : y + 1, x : x + 1]
-                    hsv = cv2.cvtColor(pixel, cv2.COLOR_BGR2HSV_FULL)[0, 0].astype(int)
+                if not (0 <= x < width and 0 <= y < height):
+                    out[n, grid.part[r], m] += grid.weights[r, c]
+                    continue
+                pixel = frame[y : y + 1, x : x + 1]
+                hsv = cv2.cvtColor(pixel, cv2.COLOR_BGR2HSV_FULL)[0, 0].astype(int)
+                for vb, share in _value_bins(int(hsv[2]), config):
                     hb = hsv[0] * config.bins_h // 256
                     sb = hsv[1] * config.bins_s // 256
-                    vb = hsv[2] * config.bins_v // 256
                     if config.achromatic_collapse:
                         if sb == 0 or vb == 0:
                             hb = 0
                         if vb == 0:
                             sb = 0
                     b = (hb * config.bins_s + sb) * config.bins_v + vb
-                else:
-                    b = m
-                out[n, grid.part[r], b] += grid.weights[r, c]
+                    out[n, grid.part[r], b] += grid.weights[r, c] * share
     return out
 
 
-@pytest.mark.parametrize("parts, collapse", [(1, False), (2, True), (4, True)])
-def test_vectorised_histograms_equal_the_slow_reference(parts: int, collapse: bool) -> None:
+def _value_bins(level: int, config: ColorConfig) -> list[tuple[int, float]]:
+    """Value bins of an 8-bit level with their shares: one, or with soft bins the two
+    whose centres are nearest, by nearness (the upper share in 1/255ths)."""
+    bv = config.bins_v
+    if config.value_blend == 0:
+        return [(level * bv // 256, 1.0)]
+    position = (level + 0.5) * bv / 256 - 0.5  # bin centres are the integers
+    below = int(np.floor(position))
+    blended = min(max((position - below - 0.5) / config.value_blend + 0.5, 0.0), 1.0)
+    upper = round(blended * 255) / 255
+    return [(min(max(below, 0), bv - 1), 1 - upper), (min(max(below + 1, 0), bv - 1), upper)]
+
+
+@pytest.mark.parametrize(
+    "parts, collapse, blend", [(1, False, 0.0), (2, True, 0.0), (4, True, 0.0),
+                               (1, False, 1.0), (2, True, 1.0), (2, True, 0.5)]
+)  # fmt: skip
+def test_vectorised_histograms_equal_the_slow_reference(
+    parts: int, collapse: bool, blend: float
+) -> None:
     rng = np.random.default_rng(3)
     frame = rng.integers(0, 256, (60, 80, 3), dtype=np.uint8)
-    config = ColorConfig(grid_cols=8, grid_rows=16, parts=parts, achromatic_collapse=collapse)
+    config = ColorConfig(
+        grid_cols=8, grid_rows=16, parts=parts, achromatic_collapse=collapse, value_blend=blend
+    )
     # boxes inside, straddling the edges and fully outside the frame
     boxes = np.array(
         [[40.0, 30.0, 20.0, 30.0], [3.0, 5.0, 16.0, 24.0], [78.0, 58.0, 10.0, 12.0], [200, 9, 8, 8]]
@@ -91,11 +111,61 @@ def test_a_grids_per_box_count_arrays_are_bounded_and_go_with_the_grid() -> None
         again = box_histograms(bins, (0, 0), boxes, grid, 216)
         np.testing.assert_array_equal(again, first[:n])
     assert len(grid._per_n) == _PER_GRID
-    held = weakref.ref(grid._per_n[(11, 216)][1])
+    held = weakref.ref(grid._per_n[(11, 216)].weights)
     gone = weakref.ref(grid)
     del grid
     gc.collect()
     assert gone() is None and held() is None
+
+
+@pytest.mark.parametrize("blend", [1.0, 0.5, 0.0])
+def test_a_shirt_on_a_value_bin_edge_is_the_same_colour_either_side_of_it(
+    blend: float,
+) -> None:
+    """The same blue shirt at V 168 and, a little brighter, at V 176 (the hard edge between
+    value bins 3 and 4 is at 170.7). With soft value bins he matches his model either side
+    of the edge; with hard bins every pixel changes bin and he matches it not at all
+    (synthetic:22)."""
+    frame = np.full((120, 160, 3), 90, np.uint8)  # grey surroundings
+    frame[30:90, 20:50] = (168, 84, 42)  # same hue and saturation, V 168 and 176
+    frame[30:90, 110:140] = (176, 88, 44)
+    likelihood = ColorLikelihood(ColorConfig(value_blend=blend), GmmConfig())
+    there, brighter = np.array([[35.0, 60.0, 30.0, 60.0], [125.0, 60.0, 30.0, 60.0]])
+    likelihood.init(frame, there)
+    weighed = bhattacharyya(likelihood.histograms(frame, brighter[None, :]), likelihood.model)
+    similarity = likelihood.similarity(frame, brighter)
+    if blend > 0:
+        assert weighed[0] > 0.9  # 0.98 with blend 1, 0.92 with 0.5
+        assert similarity > 0.9
+    else:
+        assert weighed[0] < 0.05
+        assert similarity < 0.05
+    assert likelihood.similarity(frame, there) == pytest.approx(1.0)
+
+
+def test_soft_value_bins_split_a_level_by_nearness_to_the_bin_centres() -> None:
+    """Hand-computed: with 6 value bins the centres are at levels 20.8, 63.5, ...; level 168
+    sits at (168.5 * 6 / 256) - 0.5 = 3.4492 bins, so 0.5508 of it goes to bin 3 and 0.4492
+    (115/255) to bin 4; the levels at the ends stay whole in the end bins."""
+    luts = make_luts(ColorConfig(value_blend=1.0))
+    assert luts.value_upper is not None and luts.upper_share is not None
+    assert (luts.value[168], luts.value_upper[168]) == (3, 4)
+    assert luts.upper_share[168] == 115
+    assert luts.value[0] == luts.value_upper[0] == 0
+    assert luts.value[255] == luts.value_upper[255] == 5
+
+
+def test_half_blended_value_bins_split_only_near_an_edge() -> None:
+    """`value_blend = 0.5` (the default): the split ramps from 0 to 1 over the half bin
+    round each edge. Level 168 is 0.0508 bins below the edge at 3.5, so the upper bin takes
+    (0.4492 - 0.5) / 0.5 + 0.5 = 0.3984 of it (102/255); level 149, at 3.004 bins, is more
+    than a quarter bin from either edge and stays whole in bin 3, as with hard bins."""
+    luts = make_luts(ColorConfig(value_blend=0.5))
+    assert luts.value_upper is not None and luts.upper_share is not None
+    assert (luts.value[168], luts.value_upper[168], luts.upper_share[168]) == (3, 4, 102)
+    assert (luts.value[149], luts.upper_share[149]) == (3, 0)
+    hard = make_luts(ColorConfig(value_blend=0.0))
+    assert hard.upper_share is None  # the seed's bins, one plane
 
 
 def test_kernel_weighs_the_centre_most() -> None:

@@ -10,15 +10,18 @@ over `particle * (bins + 1) + bin`. Samples outside the frame fall into an extra
 instead of being judged on its visible half alone.
 
 Beyond the seed: grey and near-black pixels can be collapsed into hue bin 0 (their hue is
-noise), and the target model can be background-weighted: colours frequent in a ring
-around the target are down-weighted (Ning et al.'s corrected background-weighted
-histogram applied to the target model only).
+noise); a pixel's weight can be split between its two nearest value bins (soft value
+binning: a colour on a bin edge does not flip between bins with the shading); and the
+target model can be background-weighted: colours frequent in a ring around the target are
+down-weighted (Ning et al.'s corrected background-weighted histogram applied to the
+target model only).
 """
 
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import cast
 
 import cv2
 import numpy as np
@@ -28,6 +31,8 @@ from ptzd.vision.config import ColorConfig, GmmConfig
 from ptzd.vision.gmm import GmmTargetModel
 from ptzd.vision.likelihood import FloatArray, Frame
 
+# A bin image is H x W bin indices, or with soft value bins 3 x H x W: the lower bin, the
+# upper bin and the upper bin's share of the pixel (0..255).
 BinImage = NDArray[np.uint8] | NDArray[np.int16]
 Step = tuple[int, int]
 # Background colours rarer than this share of the ring keep full weight in the target model.
@@ -44,18 +49,36 @@ class BinLuts:
 
     hue: NDArray[np.int16]
     saturation: NDArray[np.int16]
-    value: NDArray[np.int16]
+    value: NDArray[np.int16]  # with soft value bins: the lower of the two
     collapse: NDArray[np.int16] | None  # bin -> bin with hue dropped where it is noise
     n_bins: int
+    # soft value bins (ColorConfig.value_blend): the upper value bin, and its share of the
+    # pixel in 1/255ths; None: hard bins
+    value_upper: NDArray[np.int16] | None = None
+    upper_share: NDArray[np.uint8] | None = None
 
 
 def make_luts(config: ColorConfig) -> BinLuts:
-    """Lookup tables for `config`'s quantisation: bin = h * (S * V) + s * V + v."""
+    """Lookup tables for `config`'s quantisation: bin = h * (S * V) + s * V + v.
+
+    Soft value bins (`value_blend` z > 0): level L sits at c = (L + 0.5) V / 256 - 0.5 in
+    value bins, whose centres are the integers, f = c - floor(c) past the lower one. The
+    upper bin floor(c) + 1 takes clip((f - 0.5) / z + 0.5, 0, 1) of it, the lower the rest
+    (both clipped to the bins there are): a level more than z / 2 bins from an edge stays
+    whole in the bin it falls in, as with hard bins."""
     levels = np.arange(256)
     bh, bs, bv = config.bins_h, config.bins_s, config.bins_v
     hue = (levels * bh // 256 * (bs * bv)).astype(np.int16)
     sat = (levels * bs // 256 * bv).astype(np.int16)
     val = (levels * bv // 256).astype(np.int16)
+    upper = share = None
+    if config.value_blend > 0:
+        position = (levels + 0.5) * bv / 256 - 0.5
+        below = np.floor(position)
+        upper_share = np.clip((position - below - 0.5) / config.value_blend + 0.5, 0.0, 1.0)
+        val = np.clip(below, 0, bv - 1).astype(np.int16)
+        upper = np.clip(below + 1, 0, bv - 1).astype(np.int16)
+        share = np.round(upper_share * 255).astype(np.uint8)
     n_bins = bh * bs * bv
     collapse = None
     if config.achromatic_collapse:
@@ -64,16 +87,18 @@ def make_luts(config: ColorConfig) -> BinLuts:
         h = np.where((s == 0) | (v == 0), 0, h)  # grey or dark: hue is noise
         s = np.where(v == 0, 0, s)  # dark: saturation is noise too
         collapse = (h * (bs * bv) + s * bv + v).astype(np.int16)
-    return BinLuts(hue, sat, val, collapse, n_bins)
+    return BinLuts(hue, sat, val, collapse, n_bins, upper, share)
 
 
 _CHANNEL_SUM = np.ones((1, 3), np.float32)
 
 
 @functools.lru_cache(maxsize=8)
-def _channel_table(luts: BinLuts) -> NDArray[np.uint8]:
-    """A 3-channel cv2.LUT table: H, S and V levels to their bin terms (n_bins < 256)."""
-    table = np.stack([luts.hue, luts.saturation, luts.value], axis=1).astype(np.uint8)
+def _channel_table(luts: BinLuts, upper: bool) -> NDArray[np.uint8]:
+    """A 3-channel cv2.LUT table: H, S and V levels to their bin terms (n_bins < 256), with
+    the upper soft value bin's term if `upper`."""
+    value = luts.value_upper if upper and luts.value_upper is not None else luts.value
+    table = np.stack([luts.hue, luts.saturation, value], axis=1).astype(np.uint8)
     return table.reshape(256, 1, 3)
 
 
@@ -93,18 +118,28 @@ def bin_image(bgr: Frame, luts: BinLuts) -> BinImage:
     """
     if bgr.ndim == 2 or bgr.shape[2] == 1:
         bgr = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_GRAY2BGR), dtype=np.uint8)
-    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV_FULL)
+    hsv: Frame = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV_FULL), dtype=np.uint8)
+    lower = _bin_plane(hsv, luts, upper=False)
+    if luts.upper_share is None:
+        return lower
+    share = luts.upper_share[hsv[..., 2]].astype(lower.dtype, copy=False)
+    return cast(BinImage, np.stack([lower, _bin_plane(hsv, luts, upper=True), share]))
+
+
+def _bin_plane(hsv: Frame, luts: BinLuts, *, upper: bool) -> BinImage:
+    """Bin index of every pixel of an HSV image; with soft value bins the lower or upper."""
     if luts.n_bins < 256:
         # three OpenCV uint8 kernels: per-channel LUT to the bin terms, their sum (never
         # above n_bins - 1 < 255), the achromatic collapse
-        terms = cv2.LUT(hsv, _channel_table(luts))
+        terms = cv2.LUT(hsv, _channel_table(luts, upper))
         bins8 = cv2.transform(terms, _CHANNEL_SUM)
         if luts.collapse is not None:
             bins8 = cv2.LUT(bins8, _collapse_table(luts))
-        out8: NDArray[np.uint8] = np.asarray(bins8, dtype=np.uint8).reshape(bgr.shape[:2])
+        out8: NDArray[np.uint8] = np.asarray(bins8, dtype=np.uint8).reshape(hsv.shape[:2])
         return out8
+    value = luts.value_upper if upper and luts.value_upper is not None else luts.value
     bins: NDArray[np.int16] = (
-        luts.hue[hsv[..., 0]] + luts.saturation[hsv[..., 1]] + luts.value[hsv[..., 2]]
+        luts.hue[hsv[..., 0]] + luts.saturation[hsv[..., 1]] + value[hsv[..., 2]]
     )
     if luts.collapse is not None:
         bins = luts.collapse[bins]
@@ -127,9 +162,20 @@ class SampleGrid:
     # `box_histograms`' arrays for n boxes, kept with the grid so that they go with it: a
     # module-level cache keyed by grid held up to 16 of them (1.2 MB each at 300 particles)
     # for the grids of locks long ended, and the heap rose and fell by 10 MB with them
-    _per_n: dict[tuple[int, int], tuple[NDArray[np.intp], FloatArray]] = field(
-        default_factory=dict, init=False, repr=False
-    )
+    _per_n: dict[tuple[int, int], _PerN] = field(default_factory=dict, init=False, repr=False)
+
+
+@dataclass(eq=False)
+class _PerN:
+    """`box_histograms`' arrays for n boxes on one grid (see `_per_n_arrays`)."""
+
+    offsets: NDArray[np.intp]  # histogram column of each sample's bin 0
+    weights: FloatArray  # the grid's weights repeated n times
+    # soft value bins: room for both halves of every sample's column and weight, reused
+    # frame after frame; allocated afresh (4.8 MB at 300 particles) every frame, glibc
+    # handed the pages back and faulted them in again, and the histograms took 9 ms, not 2
+    soft_columns: NDArray[np.intp] | None = None
+    soft_weights: FloatArray | None = None
 
 
 def _offsets(n: int, extent: float = 1.0) -> FloatArray:
@@ -188,7 +234,7 @@ def ring_grid(cols: int, rows: int, ring_scale: float) -> SampleGrid:
 _PER_GRID = 4  # box counts kept per grid: the particles, one box, and room to spare
 
 
-def _per_n_arrays(grid: SampleGrid, n: int, n_bins: int) -> tuple[NDArray[np.intp], FloatArray]:
+def _per_n_arrays(grid: SampleGrid, n: int, n_bins: int) -> _PerN:
     """For n boxes on `grid`: the histogram column offset of every sample (box * parts *
     (bins + 1) + part * (bins + 1)), and the grid's weights repeated n times, contiguous
     (bincount wants a flat array). Kept for the last `_PER_GRID` (n, n_bins)."""
@@ -197,7 +243,7 @@ def _per_n_arrays(grid: SampleGrid, n: int, n_bins: int) -> tuple[NDArray[np.int
     if found is None:
         per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None, None]
         offsets = per_box + (grid.part * (n_bins + 1))[None, :, None]
-        found = (offsets, np.tile(grid.weights.ravel(), n))
+        found = _PerN(offsets, np.tile(grid.weights.ravel(), n))
         while len(grid._per_n) >= _PER_GRID:
             del grid._per_n[next(iter(grid._per_n))]
     grid._per_n[key] = found
@@ -214,14 +260,23 @@ def bins_for_region(
 
 
 def pad_bins(bins: BinImage, n_bins: int) -> BinImage:
-    """`bins` with a one-pixel border of the "outside" bin `n_bins`, for `box_histograms`."""
-    if bins.dtype == np.uint8:
-        border = cv2.copyMakeBorder(bins, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=n_bins)
+    """`bins` with a one-pixel border of the "outside" bin `n_bins`, for `box_histograms`
+    (soft value bins: both bin planes; the upper share is 0 there)."""
+    if bins.ndim == 3:
+        lower, upper, share = bins
+        planes = [_padded(lower, n_bins), _padded(upper, n_bins), _padded(share, 0)]
+        return cast(BinImage, np.stack(planes))
+    return _padded(bins, n_bins)
+
+
+def _padded(plane: BinImage, value: int) -> BinImage:
+    if plane.dtype == np.uint8:
+        border = cv2.copyMakeBorder(plane, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=value)
         out: NDArray[np.uint8] = np.asarray(border, dtype=np.uint8)
         return out
-    height, width = bins.shape
-    padded = np.full((height + 2, width + 2), n_bins, dtype=bins.dtype)
-    padded[1:-1, 1:-1] = bins
+    height, width = plane.shape
+    padded = np.full((height + 2, width + 2), value, dtype=plane.dtype)
+    padded[1:-1, 1:-1] = plane
     return padded
 
 
@@ -240,10 +295,11 @@ def box_histograms(
     counted in the last ("outside") column, without masks. Each part sums to one.
     With `step` = (sx, sy) other than (1, 1) the bin image holds every sx-th column and
     sy-th row of the region (`bins_for_region`), and a sample takes the retained pixel at or
-    above-left of it.
+    above-left of it. A soft bin image (3 planes) splits each sample's weight between its
+    lower and upper value bin.
     """
     n = boxes.shape[0]
-    height, width = padded.shape[0] - 2, padded.shape[1] - 2
+    height, width = padded.shape[-2] - 2, padded.shape[-1] - 2
     if step == (1, 1):
         x0, y0 = origin[0] - 1, origin[1] - 1
         xs = np.floor(boxes[:, 0:1] - x0 + boxes[:, 2:3] * grid.u[None, :]).astype(np.intp)
@@ -258,10 +314,26 @@ def box_histograms(
     np.minimum(np.maximum(ys, 0, out=ys), height + 1, out=ys)
     ys *= width + 2
     index = ys[:, :, None] + xs[:, None, :]
-    sampled = padded.ravel().take(index)
     stride = grid.parts * (n_bins + 1)
-    offsets, weights = _per_n_arrays(grid, n, n_bins)
-    np.add(offsets, sampled, out=index)
+    per_n = _per_n_arrays(grid, n, n_bins)
+    offsets, weights = per_n.offsets, per_n.weights
+    if padded.ndim == 3:
+        # both halves of every sample in one bincount: lower bins first, then upper ones
+        lower, upper, share = padded.reshape(3, -1)
+        if per_n.soft_columns is None or per_n.soft_weights is None:
+            per_n.soft_columns = np.empty((2, *index.shape), np.intp)
+            per_n.soft_weights = np.empty((2, weights.size))
+        columns, split = per_n.soft_columns, per_n.soft_weights
+        np.add(offsets, lower.take(index), out=columns[0])
+        np.add(offsets, upper.take(index), out=columns[1])
+        np.multiply(weights, share.take(index.ravel()), out=split[1])
+        split[1] *= 1.0 / 255
+        np.subtract(weights, split[1], out=split[0])
+        soft: FloatArray = np.bincount(
+            columns.ravel(), weights=split.ravel(), minlength=n * stride
+        ).astype(np.float64, copy=False)
+        return soft.reshape(n, grid.parts, n_bins + 1)
+    np.add(offsets, padded.ravel().take(index), out=index)
     hist: FloatArray = np.bincount(index.ravel(), weights=weights, minlength=n * stride).astype(
         np.float64, copy=False
     )
@@ -530,10 +602,12 @@ class ColourVote:
 
     rf's forests see grey levels and texture only, svm's a coarse 27-bin RGB histogram;
     this adds the colour tracker's GMM-updated, background-weighted HSV model. Off on grey
-    frames (decided at `init`): there its six value bins only blur the learned model."""
+    frames (decided at `init`): there its six value bins only blur the learned model.
+    Its value bins are hard (the seed's) whatever `color.value_blend` says: rf's and svm's
+    rules were each measured with hard ones, soft ones only on the colour tracker."""
 
     def __init__(self, color: ColorConfig, gmm: GmmConfig, weight: float) -> None:
-        self._likelihood = ColorLikelihood(color, gmm)
+        self._likelihood = ColorLikelihood(color.model_copy(update={"value_blend": 0.0}), gmm)
         self._weight = weight
         self.active = False
 
