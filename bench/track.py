@@ -485,7 +485,7 @@ def speed_test(
             rates.append((len(frames) - 1) / (time.perf_counter() - t0))
         out[label] = {"median_fps": statistics.median(rates), "runs": rates}
         print(
-            f"  {label:<12} {statistics.median(rates):8.1f} frames/s  (runs: "
+            f"  {label:<22} {statistics.median(rates):8.1f} frames/s  (runs: "
             + ", ".join(f"{r:.0f}" for r in rates)
             + ")"
         )
