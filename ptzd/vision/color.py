@@ -57,6 +57,10 @@ class BinLuts:
     value_upper: NDArray[np.int16] | None = None
     upper_share: NDArray[np.uint8] | None = None
 
+    def value_terms(self, upper: bool) -> NDArray[np.int16]:
+        """The value channel's bin terms: the upper soft bin's if `upper` and bins are soft."""
+        return self.value_upper if upper and self.value_upper is not None else self.value
+
 
 def make_luts(config: ColorConfig) -> BinLuts:
     """Lookup tables for `config`'s quantisation: bin = h * (S * V) + s * V + v.
@@ -97,8 +101,8 @@ _CHANNEL_SUM = np.ones((1, 3), np.float32)
 def _channel_table(luts: BinLuts, upper: bool) -> NDArray[np.uint8]:
     """A 3-channel cv2.LUT table: H, S and V levels to their bin terms (n_bins < 256), with
     the upper soft value bin's term if `upper`."""
-    value = luts.value_upper if upper and luts.value_upper is not None else luts.value
-    table = np.stack([luts.hue, luts.saturation, value], axis=1).astype(np.uint8)
+    terms = [luts.hue, luts.saturation, luts.value_terms(upper)]
+    table = np.stack(terms, axis=1).astype(np.uint8)
     return table.reshape(256, 1, 3)
 
 
@@ -137,9 +141,8 @@ def _bin_plane(hsv: Frame, luts: BinLuts, *, upper: bool) -> BinImage:
             bins8 = cv2.LUT(bins8, _collapse_table(luts))
         out8: NDArray[np.uint8] = np.asarray(bins8, dtype=np.uint8).reshape(hsv.shape[:2])
         return out8
-    value = luts.value_upper if upper and luts.value_upper is not None else luts.value
     bins: NDArray[np.int16] = (
-        luts.hue[hsv[..., 0]] + luts.saturation[hsv[..., 1]] + value[hsv[..., 2]]
+        luts.hue[hsv[..., 0]] + luts.saturation[hsv[..., 1]] + luts.value_terms(upper)[hsv[..., 2]]
     )
     if luts.collapse is not None:
         bins = luts.collapse[bins]

@@ -53,8 +53,8 @@ class ColorConfig(StrictModel):
     # between two bins with the slightest shading, and its similarity to its own model
     # falls from 0.9 to 0.4 (synthetic:22; docs/tracking.md "Soft value bins"). Off by
     # default for now: 0.5 met the closed-loop target in more runs (96 against 95 of 120),
-    # but a still object is no longer let go while the zoom hunts (a zoom step's resampling
-    # counts as motion; tests/test_vision_stillness.py).
+    # but a still object is no longer let go while the zoom hunts (a knife-edge of the
+    # still test at a zoom step; tests/test_vision_stillness.py).
     value_blend: float = Field(default=0.0, ge=0.0, le=1.0)
     # Fixed sampling grid per particle box (columns x rows).
     grid_cols: int = Field(default=16, ge=2, le=128)
