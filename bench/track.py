@@ -19,8 +19,8 @@ Every tracker starts from the ground-truth box of a sequence's first frame and i
 the other frames with ground truth (ptzd.metrics: OTB success AUC, precision at 20 px, lost
 frames). Frames are decoded/rendered before tracking, so the frames/s column is tracking only.
 The speed section times each tracker on vtest frames (768x576), ptzd with N = 100 and with its
-default N (also with soft value bins, `color.value_blend = 0.5`, for what they cost), pinned
-to one core, the median of `--repeats` runs.
+default N (also with the seed's hard value bins, `color.value_blend = 0`, for what the
+default soft bins cost), pinned to one core, the median of `--repeats` runs.
 
 Prints a table, writes bench/results/track.json and bench/results/track_success.png.
 The machine is shared (2 cores, other work running): frame rates are noisy; compare the
@@ -464,11 +464,11 @@ def speed_test(
                 entries.append(
                     (f"ptzd N={n_default}", lambda: PtzdTracker("ptzd", None, seed, True))
                 )
-            # soft value bins (off by default), for what they cost
+            # the seed's hard value bins, for what the default soft ones cost
             entries.append(
                 (
-                    f"ptzd N={n_default} soft bins",
-                    lambda: PtzdTracker("ptzd", None, seed, True, color={"value_blend": 0.5}),
+                    f"ptzd N={n_default} hard bins",
+                    lambda: PtzdTracker("ptzd", None, seed, True, color={"value_blend": 0.0}),
                 )
             )
         elif name in PEERS:

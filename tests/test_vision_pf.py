@@ -593,7 +593,9 @@ def _wall_frame(t: int) -> tuple[np.ndarray, tuple[float, float, float, float]]:
     return img, other
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+# (with tracker seed 0 the box unlimited goes up onto his shirt for 22 frames, then the
+# tracker gives up two frames before the end: seeds 1 and 2 show the failure whole)
+@pytest.mark.parametrize("seed", [1, 2])
 @pytest.mark.parametrize("max_step_y", [0.2, 20.0])
 def test_a_look_alike_s_top_further_back_is_not_followed(seed: int, max_step_y: float) -> None:
     occlusion = {"follow_max_step_x": 1.0 if max_step_y < 1 else 20.0,

@@ -59,6 +59,39 @@ def test_a_zoom_step_is_taken_out_too_and_unseen_borders_do_not_count() -> None:
     assert strip is not None and strip[0] == 0.0
 
 
+def zoom_about_centre(factor: float) -> np.ndarray:
+    c = 1.0 - factor
+    return np.array([[factor, 0.0, 160 * c], [0.0, factor, 120 * c], [0.0, 0.0, 1.0]])
+
+
+def test_a_zoom_step_s_resampled_edges_are_not_motion_but_a_walker_is() -> None:
+    # zooming in on a view that was itself zoomed out: the previous frame warped to match is
+    # an enlarged, twice-resampled image, and every sharp edge in it comes out blurred
+    yy, xx = np.mgrid[0:240, 0:320]
+    board = np.dstack([((xx // 8 + yy // 8) % 2 * 200 + 20).astype(np.uint8)] * 3)
+
+    def view(image: np.ndarray, factor: float) -> np.ndarray:
+        return np.asarray(cv2.warpPerspective(image, zoom_about_centre(factor), (320, 240)))
+
+    motion = MotionMap(diff_threshold=20)
+    motion.reset(view(board, 1 / 1.1))
+    motion.transform(zoom_about_centre(1.1))
+    motion.update(view(board, 1.0), None)
+    moving = motion.moving()
+    # (a third of the board's pixels, the thin lines along its edges, without the opening)
+    assert moving is not None and moving.mean() < 0.001
+    # a walker's motion is a blob, not a line: it survives
+    scene = Scene(velocity=(3.0, 0.0))
+    step = zoom_about_centre(1.1)
+    motion.reset(scene.frame(7))
+    motion.transform(step)
+    motion.update(view(scene.frame(8), 1.1), None)
+    x, y, w, h = scene.truth(8)
+    cx, cy, _ = step @ np.array([x + w / 2, y + h / 2, 1.0])
+    walker = motion.moving_fraction(np.array([[cx, cy, 1.1 * w, 1.1 * h]]))
+    assert walker is not None and walker[0] > 0.15
+
+
 def test_boxes_are_scored_at_once_and_clipped_to_the_frame() -> None:
     still = np.full((100, 100), 50, np.uint8)
     moved = still.copy()

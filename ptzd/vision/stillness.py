@@ -21,6 +21,7 @@ from ptzd.vision.features import to_grey
 from ptzd.vision.likelihood import FloatArray, Frame
 
 _IDENTITY = np.eye(3)
+_OPEN_KERNEL = np.ones((3, 3), np.uint8)
 
 
 def camera_still(homography: FloatArray | None) -> bool:
@@ -49,6 +50,7 @@ class MotionMap:
         self._valid = np.zeros(shape, np.uint8)
         self._full = np.full(shape, 255, np.uint8)
         self._moving = np.zeros(shape, np.uint8)
+        self._opened = np.zeros(shape, np.uint8)
         self._integral = np.zeros((shape[0] + 1, shape[1] + 1), np.int32)
 
     def _load(self, frame: Frame) -> bool:
@@ -79,6 +81,7 @@ class MotionMap:
         """Mark what moved from the previous frame to `frame`; `ego_motion` maps the previous
         frame's pixels into this one (None: the camera did not move)."""
         same = self._load(frame)
+        zoomed = not np.allclose(self._pending, _IDENTITY)
         motion = self._pending if ego_motion is None else ego_motion @ self._pending
         self._pending = _IDENTITY.copy()
         self._known = same and self._have_previous
@@ -96,6 +99,12 @@ class MotionMap:
         cv2.threshold(self._moving, self._threshold, 1, cv2.THRESH_BINARY, dst=self._moving)
         if not still:
             cv2.min(self._moving, self._valid, dst=self._moving)  # 1 where valid (255), else 0
+        if zoomed:
+            # A zoom step rescales the whole image, and the previous frame warped to match is
+            # resampled twice: every sharp edge comes out a pixel or two off and "moves".
+            # Those lines are thin; what a walker leaves is not: an opening keeps the blobs.
+            cv2.morphologyEx(self._moving, cv2.MORPH_OPEN, _OPEN_KERNEL, dst=self._opened)
+            self._moving, self._opened = self._opened, self._moving
         cv2.integral(self._moving, sum=self._integral, sdepth=cv2.CV_32S)
 
     def moving(self) -> NDArray[np.uint8] | None:
