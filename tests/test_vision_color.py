@@ -11,6 +11,7 @@ import pytest
 
 from ptzd.vision.color import (
     _PER_GRID,
+    _SOFT_CHUNK,
     ColorLikelihood,
     background_weights,
     bhattacharyya,
@@ -98,11 +99,12 @@ def test_vectorised_histograms_equal_the_slow_reference(
     np.testing.assert_allclose(sub, fast[:1])
 
 
-def test_a_grids_per_box_count_arrays_are_bounded_and_go_with_the_grid() -> None:
+@pytest.mark.parametrize("blend", [0.0, 0.5])
+def test_a_grids_per_box_count_arrays_are_bounded_and_go_with_the_grid(blend: float) -> None:
     """A lock makes a new grid (the box's aspect); what `box_histograms` keeps for a grid
     (per box count) is freed with it, and a few box counts are kept at most."""
     rng = np.random.default_rng(5)
-    luts = make_luts(ColorConfig())
+    luts = make_luts(ColorConfig(value_blend=blend))
     bins = pad_bins(bin_image(rng.integers(0, 256, (60, 80, 3), dtype=np.uint8), luts), 216)
     grid = kernel_grid(16, 32, aspect=0.4, parts=2)
     first = box_histograms(bins, (0, 0), np.tile([40.0, 30.0, 20.0, 30.0], (300, 1)), grid, 216)
@@ -116,6 +118,31 @@ def test_a_grids_per_box_count_arrays_are_bounded_and_go_with_the_grid() -> None
     del grid
     gc.collect()
     assert gone() is None and held() is None
+
+
+def test_soft_histograms_of_many_boxes_are_made_in_passes_with_bounded_scratch() -> None:
+    """A frame-wide scan's hundreds of boxes: the same histograms as box by box, and the
+    scratch the grid keeps is for `_SOFT_CHUNK` boxes however many there are."""
+    rng = np.random.default_rng(7)
+    luts = make_luts(ColorConfig(value_blend=0.5))
+    bins = pad_bins(bin_image(rng.integers(0, 256, (60, 80, 3), dtype=np.uint8), luts), 216)
+    grid = kernel_grid(16, 32, aspect=0.4, parts=2)
+    n = 2 * _SOFT_CHUNK + 17  # two whole passes and a part
+    boxes = np.column_stack(
+        [
+            rng.uniform(0, 80, n),
+            rng.uniform(0, 60, n),
+            rng.uniform(6, 30, n),
+            rng.uniform(10, 50, n),
+        ]
+    )
+    together = box_histograms(bins, (0, 0), boxes, grid, 216)
+    one_by_one = np.concatenate([box_histograms(bins, (0, 0), b[None], grid, 216) for b in boxes])
+    np.testing.assert_allclose(together, one_by_one, atol=1e-12)
+    kept = grid._per_n[(_SOFT_CHUNK, 216)]
+    assert kept.soft_columns is not None and kept.soft_weights is not None
+    assert kept.soft_columns.size == kept.soft_weights.size == 2 * _SOFT_CHUNK * 16 * 32
+    assert (n, 216) not in grid._per_n
 
 
 @pytest.mark.parametrize("blend", [1.0, 0.5, 0.0])

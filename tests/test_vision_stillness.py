@@ -10,7 +10,7 @@ import pytest
 from ptzd.vision.config import TrackerConfig
 from ptzd.vision.stillness import MotionMap, StillCounter, motion_weights
 from ptzd.vision.tracking import TrackState, make_tracker
-from tests.vision_helpers import Scene, twin_outcomes
+from tests.vision_helpers import Scene, background, draw_person, twin_outcomes
 
 
 def centre(box: tuple[float, float, float, float]) -> np.ndarray:
@@ -154,6 +154,38 @@ def test_a_still_box_is_let_go_while_the_zoom_hunts(config: TrackerConfig) -> No
         states.append(tracker.update(view).state)
     assert states[:20] == [TrackState.TRACKING] * 20
     assert TrackState.LOST in states[25:]
+
+
+def test_a_still_box_in_doubt_is_let_go_sooner() -> None:
+    # a figure standing still; from frame 5 most of its trousers are another colour, so the
+    # box scores in doubt (under learn_threshold) and its model stops learning: a patch of
+    # background that half matches the target looks like this to the tracker
+    box = (140.0, 90.0, 24.0, 60.0)
+
+    def frame(t: int, changed: float) -> np.ndarray:
+        img = background(320, 240, 0)[:240, :320].copy()
+        draw_person(img, box, (40, 40, 200), (160, 60, 20))
+        if t >= 5:
+            cv2.rectangle(img, (140, 120), (140 + round(24 * changed) - 1, 149), (60, 120, 40), -1)
+        return img
+
+    def first_occluded(changed: float, doubt_frames: int) -> tuple[int, float]:
+        stillness = {"doubt_frames": doubt_frames}
+        tracker = make_tracker(TrackerConfig(kind="color", stillness=stillness))
+        tracker.init(frame(0, changed), box)
+        results = [tracker.update(frame(t, changed)) for t in range(1, 80)]
+        states = [r.state for r in results]
+        confidence = float(np.median([r.confidence for r in results[10:20]]))
+        return 1 + states.index(TrackState.OCCLUDED), confidence
+
+    # in doubt: let go 20 still frames after the change instead of 50
+    at, confidence = first_occluded(0.9, 20)
+    assert 0.6 < confidence < 0.75
+    assert 20 <= at <= 30
+    assert first_occluded(0.9, 0)[0] >= 40
+    # a box that still matches well (the model learns the change) is held the full 50
+    at, confidence = first_occluded(0.8, 20)
+    assert confidence > 0.75 and at >= 40
 
 
 def test_motion_weights_favour_the_boxes_in_which_something_moved() -> None:

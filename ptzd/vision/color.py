@@ -174,9 +174,8 @@ class _PerN:
 
     offsets: NDArray[np.intp]  # histogram column of each sample's bin 0
     weights: FloatArray  # the grid's weights repeated n times
-    # soft value bins: room for both halves of every sample's column and weight, reused
-    # frame after frame; allocated afresh (4.8 MB at 300 particles) every frame, glibc
-    # handed the pages back and faulted them in again, and the histograms took 9 ms, not 2
+    # soft value bins: room for both halves of every sample's column and weight, for
+    # `_SOFT_CHUNK` boxes, reused frame after frame (see `_soft_histograms`)
     soft_columns: NDArray[np.intp] | None = None
     soft_weights: FloatArray | None = None
 
@@ -317,29 +316,59 @@ def box_histograms(
     np.minimum(np.maximum(ys, 0, out=ys), height + 1, out=ys)
     ys *= width + 2
     index = ys[:, :, None] + xs[:, None, :]
+    if padded.ndim == 3:
+        return _soft_histograms(padded, index, grid, n_bins)
     stride = grid.parts * (n_bins + 1)
     per_n = _per_n_arrays(grid, n, n_bins)
     offsets, weights = per_n.offsets, per_n.weights
-    if padded.ndim == 3:
-        # both halves of every sample in one bincount: lower bins first, then upper ones
-        lower, upper, share = padded.reshape(3, -1)
-        if per_n.soft_columns is None or per_n.soft_weights is None:
-            per_n.soft_columns = np.empty((2, *index.shape), np.intp)
-            per_n.soft_weights = np.empty((2, weights.size))
-        columns, split = per_n.soft_columns, per_n.soft_weights
-        np.add(offsets, lower.take(index), out=columns[0])
-        np.add(offsets, upper.take(index), out=columns[1])
-        np.multiply(weights, share.take(index.ravel()), out=split[1])
-        split[1] *= 1.0 / 255
-        np.subtract(weights, split[1], out=split[0])
-        soft: FloatArray = np.bincount(
-            columns.ravel(), weights=split.ravel(), minlength=n * stride
-        ).astype(np.float64, copy=False)
-        return soft.reshape(n, grid.parts, n_bins + 1)
     np.add(offsets, padded.ravel().take(index), out=index)
     hist: FloatArray = np.bincount(index.ravel(), weights=weights, minlength=n * stride).astype(
         np.float64, copy=False
     )
+    return hist.reshape(n, grid.parts, n_bins + 1)
+
+
+# Boxes per pass of `_soft_histograms`. Its scratch is kept with the grid for this many
+# boxes whatever the count: allocated afresh every frame (4.8 MB at 300 particles), glibc
+# handed the pages back and faulted them in again, and the histograms took 9 ms, not 2;
+# kept for every count, the frame-wide scan's (up to 600 boxes, a count that changes with
+# the box size) held 10 MB a grid and the heap swung by 40 MB. 150: the default 300
+# particles in two passes, 2.5 MB on the default grid.
+_SOFT_CHUNK = 150
+
+
+def _soft_histograms(
+    padded: BinImage, index: NDArray[np.intp], grid: SampleGrid, n_bins: int
+) -> FloatArray:
+    """`box_histograms` on a soft bin image (lower bin, upper bin, upper share planes):
+    both halves of every sample in one bincount, lower bins first, then upper ones, in
+    passes of at most `_SOFT_CHUNK` boxes."""
+    n, samples = index.shape[0], index.shape[1] * index.shape[2]
+    stride = grid.parts * (n_bins + 1)
+    per_n = _per_n_arrays(grid, min(n, _SOFT_CHUNK), n_bins)
+    chunk = per_n.offsets.shape[0]
+    if per_n.soft_columns is None or per_n.soft_weights is None:
+        per_n.soft_columns = np.empty(2 * chunk * samples, np.intp)
+        per_n.soft_weights = np.empty(2 * chunk * samples)
+    lower, upper, share = padded.reshape(3, -1)
+    passes: list[FloatArray] = []
+    for start in range(0, n, chunk):
+        boxes = index[start : start + chunk]
+        m = boxes.shape[0]
+        # (the first 2 m samples' room, as two contiguous halves)
+        columns = per_n.soft_columns[: 2 * m * samples].reshape(2, m, *index.shape[1:])
+        split = per_n.soft_weights[: 2 * m * samples].reshape(2, m * samples)
+        weights = per_n.weights[: m * samples]
+        np.add(per_n.offsets[:m], lower.take(boxes), out=columns[0])
+        np.add(per_n.offsets[:m], upper.take(boxes), out=columns[1])
+        np.multiply(weights, share.take(boxes.ravel()), out=split[1])
+        split[1] *= 1.0 / 255
+        np.subtract(weights, split[1], out=split[0])
+        counts = np.bincount(columns.ravel(), weights=split.ravel(), minlength=m * stride)
+        passes.append(counts.astype(np.float64, copy=False))
+    # (joined at the end: writing each pass into a preallocated result made glibc hand
+    # pages back and fault them in again every frame, 1.7 ms more at 300 particles)
+    hist = passes[0] if len(passes) == 1 else np.concatenate(passes)
     return hist.reshape(n, grid.parts, n_bins + 1)
 
 

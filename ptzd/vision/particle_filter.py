@@ -286,7 +286,7 @@ class ParticleTracker:
         parts = self._likelihood.part_similarities(frame, candidate)
         sim, weakest = float(parts.mean()), float(parts.min())
         self._confidence = sim
-        if self._box_is_still(candidate):
+        if self._box_is_still(candidate, sim):
             sim = 0.0  # on something that does not move: not the person, however alike
         was_tracking = self._state is TrackState.TRACKING
         lag = self._stall_lag(candidate, sim) if was_tracking else None
@@ -532,12 +532,17 @@ class ParticleTracker:
         """Whether the candidate may end an occlusion as far as motion goes."""
         return self._candidate_moved or not self._config.occlusion.return_needs_motion
 
-    def _box_is_still(self, box: FloatArray) -> bool:
-        """Count the frames in which `box` did not move; whether there were `still_frames`."""
+    def _box_is_still(self, box: FloatArray, similarity: float) -> bool:
+        """Count the frames in which `box` did not move; whether there were `still_frames`,
+        or `doubt_frames` with `similarity` under the learning threshold."""
         moved = None if self._motion is None else self._motion.moving_fraction(box)
         share = None if moved is None else float(moved[0])
         self._candidate_moved = share is None or share >= self._still.min_fraction
-        return self._still.count(share)
+        if self._still.count(share):
+            return True
+        doubt = self._config.stillness.doubt_frames
+        in_doubt = similarity < self._config.occlusion.learn_threshold
+        return bool(doubt) and in_doubt and self._still.run >= doubt
 
     def _still_penalty(self, boxes: FloatArray) -> FloatArray | float:
         """While lost: what is taken off the log-likelihood of boxes in which nothing moved."""
