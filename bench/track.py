@@ -452,6 +452,9 @@ def run_tracker(tracker: BenchTracker, seq: Sequence) -> Run:
     return Run(score, tracked / elapsed if elapsed > 0 else math.inf, boxes)
 
 
+HARD_BINS: dict[str, Any] = {"value_blend": 0.0}  # the seed's colour bins (speed rows)
+
+
 def speed_test(
     frames: list[Frame], init: Box, trackers: list[str], seed: int, repeats: int, n_default: int
 ) -> dict[str, dict[str, Any]]:
@@ -467,10 +470,17 @@ def speed_test(
             # the seed's hard value bins, for what the default soft ones cost
             entries.append(
                 (
-                    f"ptzd N={n_default} hard bins",
-                    lambda: PtzdTracker("ptzd", None, seed, True, color={"value_blend": 0.0}),
+                    "ptzd N=100 hard bins",
+                    lambda: PtzdTracker("ptzd", 100, seed, True, color=HARD_BINS),
                 )
             )
+            if n_default != 100:
+                entries.append(
+                    (
+                        f"ptzd N={n_default} hard bins",
+                        lambda: PtzdTracker("ptzd", None, seed, True, color=HARD_BINS),
+                    )
+                )
         elif name in PEERS:
             entries.append((name, lambda name=name: OpenCVTracker(name)))  # type: ignore[misc]
     out: dict[str, dict[str, Any]] = {}
