@@ -70,20 +70,15 @@ def measure(value_blend: float, frames: int, particles: int) -> dict[str, Any]:
     import cv2
     import numpy as np
 
+    from ptzd.sim.sources import open_wide_source
     from ptzd.vision.color import ColorLikelihood
     from ptzd.vision.config import ColorConfig, GmmConfig
 
     cv2.setNumThreads(1)
-    capture = cv2.VideoCapture(str(VIDEO))
-    images = []
-    for _ in range(50):
-        ok, image = capture.read()
-        if not ok:
-            break
-        images.append(np.asarray(image, dtype=np.uint8))
-    capture.release()
-    if not images:
-        raise SystemExit(f"cannot read {VIDEO}: run scripts/fetch-vtest.sh")
+    if not VIDEO.is_file():
+        raise SystemExit(f"no {VIDEO}: run scripts/fetch-vtest.sh")
+    video = open_wide_source(str(VIDEO))
+    images = [video.read(i) for i in range(50)]
     likelihood = ColorLikelihood(ColorConfig(value_blend=value_blend), GmmConfig())
     likelihood.init(images[0], np.array(BOX))
     rng = np.random.default_rng(0)
