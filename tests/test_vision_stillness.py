@@ -22,6 +22,12 @@ def shift(dx: float, dy: float) -> np.ndarray:
     return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
 
 
+def zoom_about_centre(factor: float) -> np.ndarray:
+    """Zooming by `factor` about the centre of a 320 x 240 view."""
+    c = 1.0 - factor
+    return np.array([[factor, 0.0, 160 * c], [0.0, factor, 120 * c], [0.0, 0.0, 1.0]])
+
+
 def test_a_walker_moves_and_the_background_does_not_under_a_panning_camera() -> None:
     scene = Scene(velocity=(3.0, 0.0), shift=(-4.0, 0.0))  # the camera pans 4 px/frame
     motion = MotionMap(diff_threshold=20)
@@ -57,11 +63,6 @@ def test_a_zoom_step_is_taken_out_too_and_unseen_borders_do_not_count() -> None:
     motion.update(panned, shift(-30, 0))
     strip = motion.moving_fraction(np.array([[305.0, 120.0, 30.0, 240.0]]))
     assert strip is not None and strip[0] == 0.0
-
-
-def zoom_about_centre(factor: float) -> np.ndarray:
-    c = 1.0 - factor
-    return np.array([[factor, 0.0, 160 * c], [0.0, factor, 120 * c], [0.0, 0.0, 1.0]])
 
 
 def test_a_zoom_step_s_resampled_edges_are_not_motion_but_a_walker_is() -> None:
@@ -148,8 +149,7 @@ def test_a_still_box_is_let_go_while_the_zoom_hunts(config: TrackerConfig) -> No
             step = 1.1 if (t // 8) % 2 else 1 / 1.1
             factor *= step
             tracker.rescale(step, (160.0, 120.0))
-        c = 1 - factor
-        zoom = np.array([[factor, 0, 160 * c], [0, factor, 120 * c], [0, 0, 1]])
+        zoom = zoom_about_centre(factor)
         view = np.asarray(cv2.warpPerspective(scene.frame(t), zoom, (320, 240)), np.uint8)
         states.append(tracker.update(view).state)
     assert states[:20] == [TrackState.TRACKING] * 20

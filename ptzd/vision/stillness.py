@@ -81,7 +81,7 @@ class MotionMap:
         """Mark what moved from the previous frame to `frame`; `ego_motion` maps the previous
         frame's pixels into this one (None: the camera did not move)."""
         same = self._load(frame)
-        zoomed = not np.allclose(self._pending, _IDENTITY)
+        zoomed = not camera_still(self._pending)  # a zoom step since the last frame
         motion = self._pending if ego_motion is None else ego_motion @ self._pending
         self._pending = _IDENTITY.copy()
         self._known = same and self._have_previous
