@@ -17,7 +17,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.tracking import TrackResult, TrackState, make_bare_tracker, make_tracker
-from tests.vision_helpers import Scene, iou
+from tests.vision_helpers import Scene, background, draw_person, iou
 
 
 def _run(scene: Scene, frames: int, config: TrackerConfig | None = None, ego: bool = False):
@@ -146,9 +146,35 @@ def test_scale_adaptation_stays_bounded_and_follows(growth: float, low: float, h
     scene = Scene(start=(120.0, 70.0, 24.0, 60.0), velocity=(0.5, 0.0), growth=growth)
     results = _run(scene, 80)
     widths = np.array([r.box[2] for r in results]) / 24.0
-    assert widths.min() >= 0.5 - 1e-9 and widths.max() <= 2.0 + 1e-9  # hard bounds
+    bounds = TrackerConfig(kind="color").scale
+    assert widths.min() >= bounds.min_scale - 1e-9 and widths.max() <= bounds.max_scale + 1e-9
     final = results[-1].box[2] / 24.0
     assert low <= final <= high, f"final relative width {final:.2f}"
+
+
+@pytest.mark.parametrize("min_scale", [None, 0.5])
+def test_a_walker_going_away_from_a_dome_zooming_after_him_is_followed(
+    min_scale: float | None,
+) -> None:
+    # synthetic:26: selected at 24 x 60 px, the dome zooms in 2x (the reference size with
+    # it, to 48 x 120), then he walks away, shrinking 0.4 % a frame to 0.3 of that
+    scene = Scene(start=(136.0, 60.0, 48.0, 120.0), velocity=(0.3, 0.0), growth=-0.004)
+    selected = (148.0, 90.0, 24.0, 60.0)
+    before_zoom = background(scene.width + 400, scene.height + 400, scene.seed)[200:440, 200:520]
+    before_zoom = before_zoom.copy()
+    draw_person(before_zoom, selected, (40, 40, 200), (160, 60, 20))
+    scale = {} if min_scale is None else {"min_scale": min_scale}
+    tracker = make_tracker(TrackerConfig.model_validate({"kind": "color", "scale": scale}))
+    tracker.init(before_zoom, selected)
+    tracker.rescale(2.0, (160.0, 120.0))
+    for t in range(1, 300):
+        result = tracker.update(scene.frame(t))
+    assert result.state is TrackState.TRACKING
+    truth = scene.truth(299)
+    if min_scale is None:  # the default floor, 0.25 of the reference: the box follows him
+        assert result.box[2] < 0.4 * 48.0 and iou(result.box, truth) > 0.5
+    else:  # held at half the reference, 24 px wide on a 14.5 px walker
+        assert result.box[2] >= 24.0 - 1e-9 and iou(result.box, truth) < 0.4
 
 
 class _FlatLikelihood:
