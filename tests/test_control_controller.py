@@ -188,6 +188,32 @@ def test_zoom_in_waits_when_the_box_shrank_faster_than_a_person_does() -> None:
     assert ctl.update(_track(collapsed, 2.0), now=2.0, hfov=40.0).zoom_step is not None
 
 
+def test_zoom_in_waits_while_the_box_grows_back() -> None:
+    # synthetic:18: the box collapsed onto a walker's upper body behind a passer-by and grew
+    # back slowly; a step in on the half-grown box made the walker 1.3x the desired size
+    zoom = ZoomConfig(
+        confirm_s=0.0, in_height_window_s=3.0, in_min_height_share=0.75, in_max_growth=0.2
+    )
+    tall, collapsed = TARGET, Box(310, 210, 20, 66)  # 1.0 and 0.55 x desired, centred
+    growing = Box(306, 198, 28, 84)  # 0.7 x desired: still too small, 1.27 x the collapse
+    for guarded in (True, False):
+        config = zoom if guarded else zoom.model_copy(update={"in_max_growth": 0.0})
+        ctl = _controller(zoom=config)
+        for i in range(10):  # 1 s at the desired height
+            ctl.update(_track(tall, i * 0.1), now=i * 0.1, hfov=40.0)
+        for t in (1.0, 2.0, 3.9):  # collapsed: held by the height share
+            assert ctl.update(_track(collapsed, t), now=t, hfov=40.0).zoom_step is None
+        step = ctl.update(_track(growing, 4.05), now=4.05, hfov=40.0).zoom_step
+        if not guarded:
+            assert step is not None and step.direction > 0  # stepped in on the half-grown box
+            continue
+        assert step is None
+        for t in (5.0, 6.0, 6.85):  # the collapsed heights are still within 3 s: held
+            assert ctl.update(_track(growing, t), now=t, hfov=40.0).zoom_step is None
+        step = ctl.update(_track(growing, 6.95), now=6.95, hfov=40.0).zoom_step
+        assert step is not None and step.direction > 0  # steady for 3 s: a real size now
+
+
 def test_stale_track_aborts_a_zoom_pulse() -> None:
     ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), max_track_age_s=0.2)
     assert ctl.update(_track(Box(305, 195, 30, 90), 0.0), now=0.0, hfov=40.0).motion.zoom == Zoom.IN

@@ -90,6 +90,11 @@ class ZoomConfig(StrictModel):
     # and a zoom in on it made him twice the desired size (synthetic:16, docs/control.md).
     in_height_window_s: float = Field(default=3.0, ge=0.0, le=60.0)
     in_min_height_share: float = Field(default=0.75, gt=0.0, le=1.0)
+    # Beyond the seed: nor on a box more than (1 + `in_max_growth`) x the shortest it has
+    # been in that window (0: off). A box growing back after a collapse is smaller than
+    # the walker still, and a step in on it made him 1.3x the desired size; a walker
+    # coming closer grows too, and needs no step in (synthetic:18, docs/control.md).
+    in_max_growth: float = Field(default=0.2, ge=0.0, le=10.0)
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:

@@ -254,8 +254,9 @@ class PtzController:
     def _as_tall_as_lately(self, track: TrackInput, hfov: float) -> bool:
         """Whether the box is at least `in_min_height_share` of the target's tallest in the
         last `in_height_window_s` (heights over the focal length: a zoom step leaves them
-        be); without a window, always True. Called only for tracks confident enough to zoom
-        in on, so only their heights are remembered."""
+        be), and, with `in_max_growth`, at most (1 + it) x the shortest: steady enough to
+        zoom in on. Without a window, always True. Called only for tracks confident enough
+        to zoom in on, so only their heights are remembered."""
         zoom = self.config.zoom
         if zoom.in_height_window_s <= 0:
             return True
@@ -266,7 +267,9 @@ class PtzController:
         while heights and heights[0][0] < track.capture_time - zoom.in_height_window_s:
             heights.popleft()
         tallest = max((h for _, h in heights), default=height)
-        return height >= zoom.in_min_height_share * tallest
+        shortest = min((h for _, h in heights), default=height)
+        growing = zoom.in_max_growth > 0 and height > (1 + zoom.in_max_growth) * shortest
+        return height >= zoom.in_min_height_share * tallest and not growing
 
     def _feedforward(self, v_px_s: float, hfov: float, track: TrackInput) -> float:
         """The target's own angular rate (deg/s) from its image velocity, times the
