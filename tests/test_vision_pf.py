@@ -17,7 +17,7 @@ from ptzd.vision.particle_filter import (
     zoom_homography,
 )
 from ptzd.vision.tracking import TrackResult, TrackState, make_bare_tracker, make_tracker
-from tests.vision_helpers import Scene, background, draw_person, iou
+from tests.vision_helpers import Scene, iou
 
 
 def _run(scene: Scene, frames: int, config: TrackerConfig | None = None, ego: bool = False):
@@ -160,9 +160,7 @@ def test_a_walker_going_away_from_a_dome_zooming_after_him_is_followed(
     # it, to 48 x 120), then he walks away, shrinking 0.4 % a frame to 0.3 of that
     scene = Scene(start=(136.0, 60.0, 48.0, 120.0), velocity=(0.3, 0.0), growth=-0.004)
     selected = (148.0, 90.0, 24.0, 60.0)
-    before_zoom = background(scene.width + 400, scene.height + 400, scene.seed)[200:440, 200:520]
-    before_zoom = before_zoom.copy()
-    draw_person(before_zoom, selected, (40, 40, 200), (160, 60, 20))
+    before_zoom = Scene(start=selected).frame(0)  # the same ground, him at half the size
     scale = {} if min_scale is None else {"min_scale": min_scale}
     tracker = make_tracker(TrackerConfig.model_validate({"kind": "color", "scale": scale}))
     tracker.init(before_zoom, selected)
