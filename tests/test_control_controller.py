@@ -73,7 +73,7 @@ def test_stale_frames_stop_a_widening_dome_without_a_target() -> None:
 
 
 def test_lost_stops_holds_then_goes_home_once() -> None:
-    ctl = _controller(lost=LostConfig(hold_s=2.0, home_preset=7))
+    ctl = _controller(lost=LostConfig(follow_lost_s=0.0, hold_s=2.0, home_preset=7))
     decisions = [
         ctl.update(_track(TARGET, t, state=TrackState.LOST), now=t, hfov=60.0)
         for t in (0.0, 1.0, 1.9)
@@ -110,6 +110,26 @@ def test_occluded_follows_the_coasting_box_without_zooming_or_holds() -> None:
         occluded_right, now=0.0, hfov=60.0
     )
     assert held.motion == STOP and held.mode == "hold"
+
+
+def test_a_lost_track_is_followed_for_follow_lost_s_then_stopped() -> None:
+    # a walker hidden behind a column for longer than the tracker's occlusion limit: the
+    # dome follows the coasting box for follow_lost_s more, without zooming, then stops
+    lost_right = [_track(Box(600, 180, 20, 60), t, state=TrackState.LOST) for t in (0, 0.5, 1.1)]
+    ctl = _controller(zoom=ZoomConfig(confirm_s=0.0), lost=LostConfig(follow_lost_s=1.0))
+    decisions = [ctl.update(track, now=track.capture_time, hfov=60.0) for track in lost_right]
+    assert [d.mode for d in decisions] == ["coast", "coast", "lost"]
+    assert all(d.motion.pan > 0 and d.zoom_step is None for d in decisions[:2])
+    assert decisions[2].motion == STOP
+    # the hold before going home counts from the loss, not from the end of the following
+    homing = _controller(lost=LostConfig(follow_lost_s=1.0, hold_s=2.0, home_preset=3))
+    modes = [homing.update(_track(TARGET, t, state=TrackState.LOST), now=t, hfov=60.0).mode
+             for t in (0.0, 1.5, 2.1)]  # fmt: skip
+    assert modes == ["coast", "lost", "home"]
+    # the default, and with follow_occluded off: stop at once
+    for lost in (LostConfig(follow_lost_s=0.0), LostConfig(follow_occluded=False)):
+        first = _controller(lost=lost).update(lost_right[0], now=0.0, hfov=60.0)
+        assert first.mode == "lost" and first.motion == STOP
 
 
 def test_narrower_fov_turns_slower() -> None:
@@ -285,7 +305,7 @@ def test_without_a_home_preset_going_home_zooms_fully_out_once() -> None:
     assert ctl.update(None, now=15.1, hfov=60.0).motion == STOP  # for widen_s, then stop
     assert ctl.go_home(20.0) is None and ctl.update(None, now=21.0, hfov=60.0).motion == STOP
     # a lost selected target: stop, hold, then widen (once)
-    lost = _controller(lost=LostConfig(hold_s=2.0, widen_s=5.0))
+    lost = _controller(lost=LostConfig(follow_lost_s=0.0, hold_s=2.0, widen_s=5.0))
     modes = [lost.update(_track(TARGET, t, state=TrackState.LOST), now=t, hfov=10.0).mode
              for t in (0.0, 1.0, 2.5, 6.0, 8.0)]  # fmt: skip
     assert modes == ["lost", "lost", "widen", "widen", "lost"]

@@ -145,6 +145,10 @@ class PtzController:
             self._rest()
             return ControlDecision(STOP, "stale", track_time=track.capture_time)
         if track.state == TrackState.LOST:
+            if self._lost_since is None:
+                self._lost_since = now
+            if cfg.lost.follow_occluded and now - self._lost_since < cfg.lost.follow_lost_s:
+                return self._track(track, now, dt, hfov, zoom=False, mode="coast")
             return self._lost(now, track.capture_time)
         self._lost_since = None
         self._went_home = False
