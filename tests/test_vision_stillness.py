@@ -163,7 +163,7 @@ def test_a_still_box_in_doubt_is_let_go_sooner() -> None:
     box = (140.0, 90.0, 24.0, 60.0)
 
     def frame(t: int, changed: float) -> np.ndarray:
-        img = background(320, 240, 0)[:240, :320].copy()
+        img = background(320, 240, 0).copy()
         draw_person(img, box, (40, 40, 200), (160, 60, 20))
         if t >= 5:
             cv2.rectangle(img, (140, 120), (140 + round(24 * changed) - 1, 149), (60, 120, 40), -1)

@@ -147,9 +147,10 @@ class PtzController:
         if track.state == TrackState.LOST:
             if self._lost_since is None:
                 self._lost_since = now
-            if cfg.lost.follow_occluded and now - self._lost_since < cfg.lost.follow_lost_s:
+            lost_for = now - self._lost_since
+            if cfg.lost.follow_occluded and lost_for < cfg.lost.follow_lost_s:
                 return self._track(track, now, dt, hfov, zoom=False, mode="coast")
-            return self._lost(now, track.capture_time)
+            return self._lost(now, lost_for, track.capture_time)
         self._lost_since = None
         self._went_home = False
         if track.state == TrackState.OCCLUDED:
@@ -178,11 +179,9 @@ class PtzController:
         self.zoom.layer = 0
         return Preset(PresetAction.GOTO, home)
 
-    def _lost(self, now: float, track_time: float) -> ControlDecision:
+    def _lost(self, now: float, lost_for: float, track_time: float) -> ControlDecision:
         self._rest()
-        if self._lost_since is None:
-            self._lost_since = now
-        if now - self._lost_since >= self.config.lost.hold_s and (preset := self.go_home(now)):
+        if lost_for >= self.config.lost.hold_s and (preset := self.go_home(now)):
             return ControlDecision(STOP, "home", preset=preset, track_time=track_time)
         if now < self._widen_until:
             return ControlDecision(_WIDEN, "widen", track_time=track_time)
