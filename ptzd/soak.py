@@ -922,7 +922,11 @@ class Soak:
             offset = log.stat().st_size
             began = self.now()
             sim.send_signal(sig)
-            await self._select(broker.port, truth)  # someone to lock on in the new light
+            # someone to lock on in the new light; the view may show nobody whole just then
+            # (a CI soak's dome had stopped on the pavement a lost walker had left), and the
+            # daemon switches only with a target: the operator tries again each second
+            while not await self._select(broker.port, truth) and self.now() - began < NIGHT_S:  # noqa: ASYNC110
+                await asyncio.sleep(1.0)
             switched_now = functools.partial(_switched_to, log, offset, kind)
             named = functools.partial(watcher.named_after, began, kind)
 
