@@ -123,11 +123,38 @@ def bin_image(bgr: Frame, luts: BinLuts) -> BinImage:
     if bgr.ndim == 2 or bgr.shape[2] == 1:
         bgr = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_GRAY2BGR), dtype=np.uint8)
     hsv: Frame = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV_FULL), dtype=np.uint8)
+    if luts.upper_share is not None and luts.n_bins < 256:
+        return _soft_bin_planes(hsv, luts)
     lower = _bin_plane(hsv, luts, upper=False)
     if luts.upper_share is None:
         return lower
     share = luts.upper_share[hsv[..., 2]].astype(lower.dtype, copy=False)
     return cast(BinImage, np.stack([lower, _bin_plane(hsv, luts, upper=True), share]))
+
+
+def _soft_bin_planes(hsv: Frame, luts: BinLuts) -> BinImage:
+    """`bin_image`'s three soft planes (lower bin, upper bin, upper share) in uint8, from
+    one pass of the per-channel tables: the upper bin before the achromatic collapse is
+    the lower one plus the value step (0 where the value clips at either end, else 1)."""
+    assert luts.upper_share is not None and luts.value_upper is not None
+    value = cv2.extractChannel(hsv, 2)
+    fine = cv2.transform(cv2.LUT(hsv, _channel_table(luts, False)), _CHANNEL_SUM)
+    stepped = cv2.add(fine, cv2.LUT(value, _value_step_table(luts)))
+    lower, upper = fine, stepped
+    if luts.collapse is not None:
+        table = _collapse_table(luts)
+        lower, upper = cv2.LUT(fine, table), cv2.LUT(stepped, table)
+    share = cv2.LUT(value, luts.upper_share)
+    planes = [
+        np.asarray(plane, dtype=np.uint8).reshape(hsv.shape[:2]) for plane in (lower, upper, share)
+    ]
+    return cast(BinImage, np.stack(planes))
+
+
+@functools.lru_cache(maxsize=8)
+def _value_step_table(luts: BinLuts) -> NDArray[np.uint8]:
+    """Per value level: the upper soft value bin's term less the lower one's (0 or 1)."""
+    return (luts.value_terms(True) - luts.value).astype(np.uint8)
 
 
 def _bin_plane(hsv: Frame, luts: BinLuts, *, upper: bool) -> BinImage:
@@ -162,18 +189,27 @@ class SampleGrid:
     weights: FloatArray  # (rows, cols)
     part: NDArray[np.intp]  # (rows,) stripe of each row
     parts: int
+    # the samples `box_histograms` visits: those of non-zero weight (an ellipse inscribed
+    # in the box leaves 21 % of the grid at zero, the contrast ring's box 44 %), row-major
+    sample_rows: NDArray[np.intp] = field(init=False, repr=False)
+    sample_cols: NDArray[np.intp] = field(init=False, repr=False)
     # `box_histograms`' arrays for n boxes, kept with the grid so that they go with it: a
     # module-level cache keyed by grid held up to 16 of them (1.2 MB each at 300 particles)
     # for the grids of locks long ended, and the heap rose and fell by 10 MB with them
     _per_n: dict[tuple[int, int], _PerN] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        rows, cols = np.nonzero(self.weights)
+        object.__setattr__(self, "sample_rows", rows.astype(np.intp))
+        object.__setattr__(self, "sample_cols", cols.astype(np.intp))
 
 
 @dataclass(eq=False)
 class _PerN:
     """`box_histograms`' arrays for n boxes on one grid (see `_per_n_arrays`)."""
 
-    offsets: NDArray[np.intp]  # histogram column of each sample's bin 0
-    weights: FloatArray  # the grid's weights repeated n times
+    offsets: NDArray[np.intp]  # (n, samples) histogram column of each sample's bin 0
+    weights: FloatArray  # the visited samples' weights repeated n times
     # soft value bins: room for both halves of every sample's column and weight, for
     # `_SOFT_CHUNK` boxes, reused frame after frame (see `_soft_histograms`)
     soft_columns: NDArray[np.intp] | None = None
@@ -237,15 +273,16 @@ _PER_GRID = 4  # box counts kept per grid: the particles, one box, and room to s
 
 
 def _per_n_arrays(grid: SampleGrid, n: int, n_bins: int) -> _PerN:
-    """For n boxes on `grid`: the histogram column offset of every sample (box * parts *
-    (bins + 1) + part * (bins + 1)), and the grid's weights repeated n times, contiguous
+    """For n boxes on `grid`: the histogram column offset of every visited sample (box *
+    parts * (bins + 1) + part * (bins + 1)), and their weights repeated n times, contiguous
     (bincount wants a flat array). Kept for the last `_PER_GRID` (n, n_bins)."""
     key = (n, n_bins)
     found = grid._per_n.pop(key, None)  # re-inserted below: the dict is oldest first
     if found is None:
-        per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None, None]
-        offsets = per_box + (grid.part * (n_bins + 1))[None, :, None]
-        found = _PerN(offsets, np.tile(grid.weights.ravel(), n))
+        rows, cols = grid.sample_rows, grid.sample_cols
+        per_box = (np.arange(n, dtype=np.intp) * (grid.parts * (n_bins + 1)))[:, None]
+        offsets = per_box + (grid.part[rows] * (n_bins + 1))[None, :]
+        found = _PerN(offsets, np.tile(grid.weights[rows, cols], n))
         while len(grid._per_n) >= _PER_GRID:
             del grid._per_n[next(iter(grid._per_n))]
     grid._per_n[key] = found
@@ -315,7 +352,9 @@ def box_histograms(
     np.minimum(np.maximum(xs, 0, out=xs), width + 1, out=xs)
     np.minimum(np.maximum(ys, 0, out=ys), height + 1, out=ys)
     ys *= width + 2
-    index = ys[:, :, None] + xs[:, None, :]
+    # (zero-weight samples add nothing to a histogram: only the others are gathered)
+    index = ys.take(grid.sample_rows, axis=1)
+    index += xs.take(grid.sample_cols, axis=1)
     if padded.ndim == 3:
         return _soft_histograms(padded, index, grid, n_bins)
     stride = grid.parts * (n_bins + 1)
@@ -343,7 +382,7 @@ def _soft_histograms(
     """`box_histograms` on a soft bin image (lower bin, upper bin, upper share planes):
     both halves of every sample in one bincount, lower bins first, then upper ones, in
     passes of at most `_SOFT_CHUNK` boxes."""
-    n, samples = index.shape[0], index.shape[1] * index.shape[2]
+    n, samples = index.shape
     stride = grid.parts * (n_bins + 1)
     per_n = _per_n_arrays(grid, min(n, _SOFT_CHUNK), n_bins)
     chunk = per_n.offsets.shape[0]
@@ -356,7 +395,7 @@ def _soft_histograms(
         boxes = index[start : start + chunk]
         m = boxes.shape[0]
         # (the first 2 m samples' room, as two contiguous halves)
-        columns = per_n.soft_columns[: 2 * m * samples].reshape(2, m, *index.shape[1:])
+        columns = per_n.soft_columns[: 2 * m * samples].reshape(2, m, samples)
         split = per_n.soft_weights[: 2 * m * samples].reshape(2, m * samples)
         weights = per_n.weights[: m * samples]
         np.add(per_n.offsets[:m], lower.take(boxes), out=columns[0])

@@ -44,7 +44,9 @@ class GmmTargetModel:
         self.pi: FloatArray = np.full((bins, k), 1.0 / k)
         self._rows = np.arange(bins)
         self._rows_column = self._rows[:, None]  # fancy-index rows with an (bins, k) order
-        self.model: FloatArray = self._mixture(self._order())
+        # components by pi, descending; pi changes only in update(), which renews this
+        self._by_pi = self._order()
+        self.model: FloatArray = self._mixture(self._by_pi)
 
     def _order(self) -> NDArray[np.intp]:
         # stable sort: ties keep component order, so hand-computed examples are unambiguous
@@ -62,7 +64,7 @@ class GmmTargetModel:
         cfg = self._config
         x = observed.astype(np.float64).ravel()
         gated = np.abs(x - self.model.ravel()) < cfg.diff_threshold
-        order = self._order()
+        order = self._by_pi
         rows_column = self._rows_column
         fits = (
             np.abs(x[:, None] - self.mu[rows_column, order]) < 3.0 * self.sigma[rows_column, order]
@@ -92,5 +94,6 @@ class GmmTargetModel:
             self.pi[rows, weakest] = max(cfg.beta, 1e-9)  # > 0 so the row stays normalisable
             self.pi[rows] /= self.pi[rows].sum(axis=1, keepdims=True)
 
-        self.model = self._mixture(self._order())
+        self._by_pi = self._order()
+        self.model = self._mixture(self._by_pi)
         return self.model
