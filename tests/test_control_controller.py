@@ -296,6 +296,18 @@ def test_feedforward_goes_on_with_the_coasting_track_while_occluded() -> None:
     assert _controller().update(unsure, now=0.0, hfov=30.0).motion == STOP
 
 
+def test_a_lost_track_is_followed_by_its_position_alone() -> None:
+    # past the occlusion limit the box still coasts for follow_lost_s, and the dome follows
+    # where it is (the PID, outside the stop band), not where it is heading: turning on
+    # with the coast there sent walkers out of view (docs/daemon.md, "tenth pass")
+    ctl = _controller(lost=LostConfig(follow_lost_s=1.0))
+    centred = TrackInput(TARGET, (60.0, 0.0), TrackState.LOST, 0.3, 0.0)
+    decision = ctl.update(centred, now=0.0, hfov=30.0)
+    assert decision.mode == "coast" and decision.motion == STOP
+    hidden = TrackInput(TARGET, (60.0, 0.0), TrackState.OCCLUDED, 0.3, 0.0)
+    assert _controller().update(hidden, now=0.0, hfov=30.0).motion.pan > 0  # OCCLUDED does
+
+
 def test_without_a_home_preset_going_home_zooms_fully_out_once() -> None:
     ctl = _controller(lost=LostConfig(hold_s=60.0, widen_s=5.0))
     assert ctl.go_home(10.0) is None  # no preset to send...
