@@ -114,9 +114,10 @@ class LostConfig(StrictModel):
 
     follow_occluded: bool = True
     # Beyond the seed: for this long after the track goes LOST the dome keeps following the
-    # tracker's coasting box, as while OCCLUDED, before it stops (0: stop at once). A walker
-    # hidden behind a column for longer than the tracker's occlusion limit walks on, and
-    # the tracker finds him again a few frames later (synthetic:12, docs/control.md).
+    # tracker's coasting box before it stops (0: stop at once), by the box's position only
+    # (no feed-forward: docs/daemon.md, "tenth pass"). A walker hidden behind a column for
+    # longer than the tracker's occlusion limit walks on, and the tracker finds him again
+    # a few frames later (synthetic:12, docs/control.md).
     follow_lost_s: float = Field(default=1.0, ge=0.0, le=60.0)
     hold_s: float = Field(default=5.0, ge=0.0, le=3600.0)
     home_preset: int = Field(default=0, ge=0, le=255)
