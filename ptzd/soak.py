@@ -30,10 +30,11 @@ Faults, each with its expected recovery (checked, see docs/reliability.md):
   Expect `availability` = `online` (retained) to be republished.
 - `day-night`: the sim-camera's dome goes to night mode (grey views, its IR-cut filter out;
   `ptzd.sim.cli.DUSK_SIGNAL`) for 15 s, then back (`DAWN_SIGNAL`); an operator selects a
-  walker after each. Expect the daemon's tracker (`[tracker] kind = "auto"`) to switch to
-  its night kind within 15 s of dusk (at once for a tracked target, else at the next lock)
-  and back to its day kind within 15 s of dawn, both in its log (`tracker_switched`) and in
-  the `tracker` field of its MQTT `track` messages, and frames to keep coming.
+  walker after each (each change waits up to 20 s for someone whole in view). Expect the
+  daemon's tracker (`[tracker] kind = "auto"`) to switch to its night kind within 15 s of
+  dusk (at once for a tracked target, else at the next lock) and back to its day kind
+  within 15 s of dawn, both in its log (`tracker_switched`) and in the `tracker` field of
+  its MQTT `track` messages, and frames to keep coming.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ from typing import IO, Any
 from ptzd.closed_loop import fully_visible, in_central_cell
 from ptzd.errors import UsageError
 from ptzd.heap import malloc_stats
-from ptzd.pelco.codec import FrameParser, Motion
+from ptzd.pelco.codec import FrameParser, Motion, encode
 from ptzd.sim.groundtruth import GroundTruth
 from ptzd.sim.sources import open_wide_source
 
@@ -69,10 +70,14 @@ from ptzd.sim.sources import open_wide_source
 FAULTS = ("day-night", "serial-reset", "stream-stall", "broker-restart")
 STALL_S = 6.0
 NIGHT_S = 15.0  # `day-night`: how long the night lasts, and how long each switch may take
+# `day-night`: the longest each change of light waits for someone in view (the CI soak's
+# later faults are due 36 s apart)
+LIGHT_WAIT_S = 20.0
 STOP_WITHIN_S = 1.5  # max_track_age_s (0.5) + a control tick + the wire
 OUTAGE_S = 2.0
 WATCHDOG_USEC = 10_000_000  # pings every 5 s, as the shipped unit's WatchdogSec=10
 CAMERA = "soak"
+HOME_PRESET = 1  # the dome's start pose, stored before the daemon starts
 INIT_BOX = "290,170,60,140"  # until the first MQTT select: whatever is in the view centre
 RESELECT_S = 60.0
 RETRY_SELECT_S = 2.0  # no walker fit to select: look again this soon
@@ -164,6 +169,30 @@ def run_probed(path: Path, interval: float, argv: Sequence[str]) -> int:
 
 
 # --- the parts around the daemon -----------------------------------------------------------
+
+
+async def _install_home_preset(host: str, port: int) -> None:
+    """Store the sim-camera dome's start pose (the scene's middle, fully zoomed out) as
+    preset `HOME_PRESET`, as an installer does from his keyboard before the daemon runs,
+    for the daemon's `[control.lost] home_preset`. Without a home the dome stays wherever
+    the last target led it: in a CI soak the night's walker led it to pan 84 deg, off the
+    scene's side, and it looked at nobody for the last two minutes of the run."""
+    from ptzd.pelco.codec import PelcoProtocol, Preset, PresetAction
+    from ptzd.pelco.config import SerialConfig
+
+    serial = SerialConfig()  # the soak's daemon speaks the default protocol and address
+    command = encode(
+        Preset(PresetAction.SET, HOME_PRESET),
+        protocol=PelcoProtocol(serial.protocol),
+        address=serial.address,
+    )
+    _, writer = await asyncio.open_connection(host, port)
+    try:
+        writer.write(command)
+        await writer.drain()
+    finally:
+        writer.close()
+        await writer.wait_closed()
 
 
 def _free_port() -> int:
@@ -698,6 +727,7 @@ class Soak:
             f'[serial]\nport = "socket://127.0.0.1:{serial_port}"\nreconnect_max_s = 1.0\n'
             f'[mqtt]\nenabled = true\nurl = "mqtt://127.0.0.1:{mqtt_port}"\n'
             "reconnect_max_s = 1.0\n"
+            f"[control.lost]\nhome_preset = {HOME_PRESET}\n"
         )
 
     async def run(self) -> dict[str, Any]:
@@ -730,6 +760,7 @@ class Soak:
             announced = await _announced(sim, ("serial", "http"))
             tasks.append(asyncio.create_task(_drain(sim.stdout, sim_log)))
             host, _, port = announced["serial"].removeprefix("socket://").rpartition(":")
+            await _install_home_preset(host, int(port))
             proxy = SerialProxy((host, int(port)), self.now)
             await proxy.start()
             config = self.dir / "ptzd.toml"
@@ -917,16 +948,27 @@ class Soak:
         switches: dict[str, float | None] = {}
         on_mqtt: dict[str, float | None] = {}
         frames_before = notify.frames
+        light_waits: dict[str, float] = {}
+        tries: dict[str, int] = {}
         for phase, sig, kind in (("night", DUSK_SIGNAL, kinds.night),
                                  ("day", DAWN_SIGNAL, kinds.day)):  # fmt: skip
+            # The daemon switches only with a target (at once for a tracked one, else at the
+            # next lock), so the light changes once the operator has someone whole in view
+            # to lock on: two CI soaks' dawns came while the night's walker was lost and the
+            # dome stood on an empty pavement, and 15 s of an operator looking each second
+            # found nobody (no target, rightly no switch: the fault counted unrecovered).
+            waited_from = self.now()
+            while self._choice(truth) is None and self.now() - waited_from < LIGHT_WAIT_S:  # noqa: ASYNC110
+                await asyncio.sleep(0.5)
+            light_waits[phase] = round(self.now() - waited_from, 2)
             offset = log.stat().st_size
             began = self.now()
             sim.send_signal(sig)
-            # someone to lock on in the new light; the view may show nobody whole just then
-            # (a CI soak's dome had stopped on the pavement a lost walker had left), and the
-            # daemon switches only with a target: the operator tries again each second
-            while not await self._select(broker.port, truth) and self.now() - began < NIGHT_S:  # noqa: ASYNC110
+            # he may have gone by the time the dome stands still: the operator tries each second
+            tries[phase] = 1
+            while not await self._select(broker.port, truth) and self.now() - began < NIGHT_S:
                 await asyncio.sleep(1.0)
+                tries[phase] += 1
             switched_now = functools.partial(_switched_to, log, offset, kind)
             named = functools.partial(watcher.named_after, began, kind)
 
@@ -949,6 +991,10 @@ class Soak:
             "day_switch_s": switches["day"],
             "night_on_mqtt_s": on_mqtt["night"],
             "day_on_mqtt_s": on_mqtt["day"],
+            # how long each change of light waited for someone in view, and how many times
+            # the operator then tried to select
+            "light_waited_s": light_waits,
+            "select_tries": tries,
             "recovered": None not in (*switches.values(), *on_mqtt.values())
             and notify.frames > frames_before,
             "recovery_s": switches["day"],
@@ -988,17 +1034,10 @@ class Soak:
         ):
             await asyncio.sleep(0.1)
             waited += 0.1
-        records = _last_json_lines(self.dir / "sim" / "groundtruth_view.jsonl", SHOWN_LOOKBACK)
-        record = shown_record(records, SIM_CAMERA_LATENCY_S)
-        if record is None:
+        shown = self._choice(truth)
+        if shown is None:
             return False
-        # the epoch time of the frame boxed, as the daemon's track messages give it (the
-        # newest record was rendered about now): the daemon moves the box with the dome
-        drawn_ts = time.time() - (float(records[-1]["t"]) - float(record["t"]))
-        choice = operator_choice(record, truth)
-        if choice is None:
-            return False
-        walker, box = choice
+        record, drawn_ts, (walker, box) = shown
         with contextlib.suppress(aiomqtt.MqttError):
             async with aiomqtt.Client("127.0.0.1", mqtt_port, timeout=5) as client:
                 payload = json.dumps({"select": [round(v, 1) for v in box],
@@ -1010,6 +1049,23 @@ class Soak:
                 )  # fmt: skip
                 return True
         return False
+
+    def _choice(
+        self, truth: GroundTruth
+    ) -> tuple[Mapping[str, Any], float, tuple[str, list[float]]] | None:
+        """The record of the frame the daemon has now, the epoch time it was rendered at
+        and whom the operator would select in it (`operator_choice`); None if nobody."""
+        records = _last_json_lines(self.dir / "sim" / "groundtruth_view.jsonl", SHOWN_LOOKBACK)
+        record = shown_record(records, SIM_CAMERA_LATENCY_S)
+        if record is None:
+            return None
+        choice = operator_choice(record, truth)
+        if choice is None:
+            return None
+        # the epoch time of the frame boxed, as the daemon's track messages give it (the
+        # newest record was rendered about now): the daemon moves the box with the dome
+        drawn_ts = time.time() - (float(records[-1]["t"]) - float(record["t"]))
+        return record, drawn_ts, choice
 
     def _centring(self) -> dict[str, Any]:
         path = self.dir / "sim" / "groundtruth_view.jsonl"

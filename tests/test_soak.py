@@ -322,3 +322,38 @@ def test_the_operator_boxes_the_frame_the_daemon_has() -> None:
     assert frame(0.0) == 9
     assert frame(1.0) == 0  # none that old: the oldest read
     assert shown_record([], 0.12) is None
+
+
+async def test_the_home_preset_is_stored_on_the_sim_dome_over_its_tcp_serial() -> None:
+    """The soak's installer step: real bytes over the sim-camera's real TCP serial, and the
+    dome stores its start pose as the home preset the soak's daemon goes to when lost."""
+    from ptzd.clock import RealClock
+    from ptzd.sim.camera import SimCamera
+    from ptzd.sim.config import SimConfig
+    from ptzd.sim.dome import PresetPose
+    from ptzd.sim.endpoint import TcpEndpoint
+    from ptzd.soak import HOME_PRESET, _install_home_preset
+
+    class BlackScene:  # a wide source (the dome's pose is all that matters here)
+        size, frame_count, fps, ground_truth = (160, 120), 1, 10.0, None
+
+        def read(self, index: int) -> np.ndarray:
+            return np.zeros((120, 160, 3), np.uint8)
+
+    clock = RealClock()
+    camera = SimCamera(BlackScene(), SimConfig(home_pan=-12.5, home_tilt=4.0), clock)
+    endpoint = TcpEndpoint(camera.link, clock, "127.0.0.1", 0)
+    host, port = (await endpoint.open()).rsplit(":", 1)
+    runner = asyncio.create_task(camera.link.run())
+    try:
+        assert camera.dome.presets == {}
+        await _install_home_preset(host, int(port))
+        async with asyncio.timeout(10):
+            while HOME_PRESET not in camera.dome.presets:
+                await asyncio.sleep(0.01)
+                camera.dome.advance_to(clock.now())  # as the camera's render loop does
+        assert camera.dome.presets == {HOME_PRESET: PresetPose(-12.5, 4.0, 0.0)}
+        assert camera.foreign_frames == 0 and camera.link.parser.bad_checksums == 0
+    finally:
+        runner.cancel()
+        await endpoint.close()
