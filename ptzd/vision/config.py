@@ -350,6 +350,14 @@ class SvmConfig(StrictModel):
     lk_size_check: bool = True
     # Beyond the seed (eq. 8 weighs by P itself): particle weights are P ** weight_power.
     weight_power: float = Field(default=16.0, ge=1.0, le=100.0)
+    # Beyond the seed: the PF's size is the mean under weights P ** size_weight_power (its
+    # position's are P ** weight_power), and with size_restart every frame's particles
+    # start from that size. The SVM scores a box inside the walker a little above his whole
+    # box, and under P ** 16 with sizes handed down by resampling the box shrank over a
+    # long window (docs/tracking.md, "The PF's size from flatter weights"). The seed:
+    # size_weight_power = weight_power and size_restart = false.
+    size_weight_power: float = Field(default=8.0, ge=0.0, le=100.0)
+    size_restart: bool = True
     # Below this confidence the target counts as occluded (ours).
     occluded_below: float = Field(default=0.3, ge=0.0, le=1.0)
     # Beyond the seed: once occluded, the target is back only on a box scored at h2

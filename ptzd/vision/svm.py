@@ -607,8 +607,17 @@ class SvmTracker:
         total = float(prob.sum())
         weights = prob / total if total > 0 else np.full(n, 1.0 / n)
         estimate: FloatArray = weights @ p
+        if cfg.size_weight_power != cfg.weight_power:
+            # flatter weights for the size: a box too large loses P steeply and is still
+            # pulled in; the slight preference for inner boxes pulls with the power
+            flat = weights ** (cfg.size_weight_power / cfg.weight_power)
+            estimate[2:] = (flat / flat.sum()) @ p[:, 2:]
         confidence = float(self.model.probability(self._features(bgr, estimate[None]))[0])
         self._particles = p[self._rng.choice(n, size=n, p=weights)]
+        if cfg.size_restart:
+            # resampled sizes spread further every frame the SVM's P is flat over them,
+            # and a wider spread lets the weights lean further to the smaller boxes
+            self._particles[:, 2:] = estimate[2:]
         return estimate, confidence
 
     def resembles(self, frame: Frame, box: Box) -> bool:
