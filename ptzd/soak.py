@@ -61,7 +61,8 @@ from typing import IO, Any
 from ptzd.closed_loop import fully_visible, in_central_cell
 from ptzd.errors import UsageError
 from ptzd.heap import malloc_stats
-from ptzd.pelco.codec import FrameParser, Motion, encode
+from ptzd.pelco.codec import FrameParser, Motion, PelcoProtocol, Preset, PresetAction, encode
+from ptzd.pelco.config import SerialConfig
 from ptzd.sim.groundtruth import GroundTruth
 from ptzd.sim.sources import open_wide_source
 
@@ -177,9 +178,6 @@ async def _install_home_preset(host: str, port: int) -> None:
     for the daemon's `[control.lost] home_preset`. Without a home the dome stays wherever
     the last target led it: in a CI soak the night's walker led it to pan 84 deg, off the
     scene's side, and it looked at nobody for the last two minutes of the run."""
-    from ptzd.pelco.codec import PelcoProtocol, Preset, PresetAction
-    from ptzd.pelco.config import SerialConfig
-
     serial = SerialConfig()  # the soak's daemon speaks the default protocol and address
     command = encode(
         Preset(PresetAction.SET, HOME_PRESET),
@@ -955,8 +953,9 @@ class Soak:
             # The daemon switches only with a target (at once for a tracked one, else at the
             # next lock), so the light changes once the operator has someone whole in view
             # to lock on: two CI soaks' dawns came while the night's walker was lost and the
-            # dome stood on an empty pavement, and 15 s of an operator looking each second
-            # found nobody (no target, rightly no switch: the fault counted unrecovered).
+            # dome looked at nobody (once off the scene's side), and 15 s of an operator
+            # looking each second found nobody (no target, rightly no switch: the fault
+            # counted unrecovered).
             waited_from = self.now()
             while self._choice(truth) is None and self.now() - waited_from < LIGHT_WAIT_S:  # noqa: ASYNC110
                 await asyncio.sleep(0.5)
