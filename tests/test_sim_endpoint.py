@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -31,28 +30,9 @@ from ptzd.sim.config import SimConfig
 from ptzd.sim.endpoint import PtyEndpoint, SerialLink, TcpEndpoint
 from ptzd.sim.groundtruth import GroundTruth
 from ptzd.sim.mjpeg import MjpegServer
+from tests.sim_helpers import ArraySource
 
 P, D = PelcoProtocol.P, PelcoProtocol.D
-
-
-@dataclass
-class ArraySource:
-    """A wide source made of numpy frames (a real `WideSource`, just not decoded from a file)."""
-
-    frames: list[np.ndarray]
-    fps: float = 10.0
-    ground_truth: GroundTruth | None = None
-
-    @property
-    def size(self) -> tuple[int, int]:
-        return self.frames[0].shape[1], self.frames[0].shape[0]
-
-    @property
-    def frame_count(self) -> int:
-        return len(self.frames)
-
-    def read(self, index: int) -> np.ndarray:
-        return self.frames[index % len(self.frames)].copy()
 
 
 def _wide_frames(n: int = 8, size: tuple[int, int] = (768, 576)) -> list[np.ndarray]:

@@ -333,15 +333,11 @@ async def test_the_home_preset_is_stored_on_the_sim_dome_over_its_tcp_serial() -
     from ptzd.sim.dome import PresetPose
     from ptzd.sim.endpoint import TcpEndpoint
     from ptzd.soak import HOME_PRESET, _install_home_preset
-
-    class BlackScene:  # a wide source (the dome's pose is all that matters here)
-        size, frame_count, fps, ground_truth = (160, 120), 1, 10.0, None
-
-        def read(self, index: int) -> np.ndarray:
-            return np.zeros((120, 160, 3), np.uint8)
+    from tests.sim_helpers import ArraySource
 
     clock = RealClock()
-    camera = SimCamera(BlackScene(), SimConfig(home_pan=-12.5, home_tilt=4.0), clock)
+    black = ArraySource([np.zeros((120, 160, 3), np.uint8)])  # the dome's pose is what matters
+    camera = SimCamera(black, SimConfig(home_pan=-12.5, home_tilt=4.0), clock)
     endpoint = TcpEndpoint(camera.link, clock, "127.0.0.1", 0)
     host, port = (await endpoint.open()).rsplit(":", 1)
     runner = asyncio.create_task(camera.link.run())
