@@ -471,6 +471,75 @@ def test_with_hysteresis_an_occluded_target_comes_back_only_at_what_it_usually_s
     assert seed[25] in "ot" and seed[26:69] == "t" * 43
 
 
+class _FarReturnLikelihood(_EdgeLikelihood):
+    """A target (0.95, box 20 px wide) walks at `speed` px a frame until frame 20, is hidden
+    completely from then (0.3 everywhere), and from frame `back_from` something scoring 0.7
+    stands `offset` px to the right of where it vanished."""
+
+    def __init__(self, speed: float, offset: float, back_from: int) -> None:
+        self.speed, self.offset, self.back_from = speed, offset, back_from
+
+    def truth_x(self, t: int) -> float:
+        return 110.0 + self.speed * min(t, 19)
+
+    def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        t = int(frame[0, 0, 0])
+
+        def near(x: float) -> np.ndarray:
+            d2 = (boxes[:, 0] - x) ** 2 + (boxes[:, 1] - self.Y) ** 2
+            return np.exp(-d2 / 200.0)
+
+        if t < 20:
+            return 0.95 * near(self.truth_x(t))
+        if t < self.back_from:
+            return np.full(len(boxes), 0.3)
+        return np.maximum(0.3, 0.7 * near(self.truth_x(19) + self.offset))
+
+
+def _far_return_states(
+    far_return_threshold: float, seed: int, speed: float, offset: float, back_from: int
+) -> str:
+    lik = _FarReturnLikelihood(speed, offset, back_from)
+    config = {
+        "seed": seed,
+        "occlusion": {"far_return_threshold": far_return_threshold},
+        "stillness": {"still_frames": 0},  # (the frames never change)
+    }
+    tracker = ParticleTracker(TrackerConfig.model_validate(config), lik)
+    frame = np.zeros((240, 400, 3), np.uint8)
+    tracker.init(frame, (lik.truth_x(0) - 10, lik.Y - 20, 20, 40))
+    states = []
+    for t in range(1, 90):
+        frame[0, 0, 0] = t
+        states.append(tracker.update(frame).state.value[0])
+    return "".join(states)  # states[i] is frame i + 1
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_an_occluded_target_comes_back_far_from_its_coast_only_on_a_strong_match(
+    seed: int,
+) -> None:
+    # a standing target; a look-alike 3.5 box widths away: the growing search region
+    # reaches it while the target is occluded, and at the plain threshold (0.6) it passes
+    plain = _far_return_states(0.0, seed, speed=0.0, offset=70.0, back_from=26)
+    assert plain[:19] == "t" * 19 and "t" in plain[25:48]
+    # further than search_radius (1.5 widths) from the coast, 0.7 is not enough at 0.8:
+    # occluded until max_frames, then lost (re-acquisition asks 0.8 too)
+    strict = _far_return_states(0.8, seed, speed=0.0, offset=70.0, back_from=26)
+    assert strict[19:48] == "o" * 29 and set(strict[48:]) == {"l"}
+    # near the coast (0.75 widths) the plain threshold still brings him back
+    near = _far_return_states(0.8, seed, speed=0.0, offset=15.0, back_from=26)
+    assert near[19:25] == "o" * 6 and set(near[25:]) == {"t"}
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_walker_who_stopped_where_he_vanished_is_near_the_coast_s_path(seed: int) -> None:
+    # he walked at 3 px a frame, the coast walks on; he is back where he vanished 16 frames
+    # later, 48 px (2.4 widths) behind the coasting box but on the path it took: near
+    states = _far_return_states(0.8, seed, speed=3.0, offset=0.0, back_from=36)
+    assert states[19:35] == "o" * 16 and set(states[37:]) == {"t"}
+
+
 @pytest.mark.parametrize("kind", ["color", "rf", "svm"])
 def test_resembles_tells_the_target_from_the_background(kind: str) -> None:
     scene = Scene(velocity=(2.0, 0.0))

@@ -167,6 +167,15 @@ class OcclusionConfig(StrictModel):
     # coming out from behind someone in vtest.avi (vtest#3 failed for 2 of 3 tracker
     # seeds); the stillness test below catches the edge instead (docs/daemon.md).
     recover_share: float = Field(default=0.0, ge=0.0, le=1.0)
+    # Beyond the seed: an occluded target coming back further than `search_radius` box
+    # sizes (per axis) from the coast's path (from where he was last tracked to the coasting
+    # box: he may have stopped anywhere along it) must score at least this. The search
+    # region grows while he is hidden, and a look-alike across the view then passed for him
+    # at the plain threshold (synthetic:21: walker 4 behind a column, the box back at 0.64
+    # on part of a nearer walker 4 box widths away). 0: off (the plain threshold everywhere).
+    # 0.8 (= reacquire_threshold): closed loop, 240 runs, mean centred 0.955 -> 0.960, in
+    # view 0.975 -> 0.981 (docs/daemon.md, eleventh pass).
+    far_return_threshold: float = Field(default=0.8, ge=0.0, le=1.0)
     # Beyond the seed: an occluded target is back only where something moved (the stillness
     # test's moving fraction, `stillness.min_moving_fraction`): a person coming out from
     # behind something is walking; a hedge or pavement in his colours is not. (A lost one

@@ -203,6 +203,8 @@ class ParticleTracker:
         # similarities of the last tracked frames: what this target usually scores
         self._recent: deque[float] = deque(maxlen=_RECENT_FRAMES)
         self._stalled = False  # occluded by a look-alike edge (see OcclusionConfig.stall_lag)
+        # the box's centre when the target was last tracked: one end of the coast's path
+        self._vanished_at: FloatArray | None = None
         self._confidence = 0.0
         still = config.stillness
         self._motion = MotionMap(still.diff_threshold) if still.still_frames else None
@@ -241,6 +243,7 @@ class ParticleTracker:
         self._state = TrackState.TRACKING
         self._occluded_frames = 0
         self._stalled = False
+        self._vanished_at = None
         self._steps.clear()
         self._recent.clear()
         self._lost_frames = 0
@@ -304,9 +307,11 @@ class ParticleTracker:
             sim = 0.0  # still behind the look-alike: only a clean match ends it
         # half of him is in view (his top above a hedge): the box follows that half
         follows_part = self._shows_a_part(parts, candidate)
-        self._transition(sim, weakest, follows_part)
-        if was_tracking and lag is None and self._state is TrackState.OCCLUDED:
-            self._velocity = self._coast_velocity()
+        self._transition(sim, weakest, follows_part, self._far_from_coast(candidate))
+        if was_tracking and self._state is TrackState.OCCLUDED:
+            self._vanished_at = self._box[:2].copy()
+            if lag is None:
+                self._velocity = self._coast_velocity()
         if self._state is not TrackState.OCCLUDED:
             self._stalled = False
         if self._state is TrackState.TRACKING:
@@ -369,6 +374,8 @@ class ParticleTracker:
         self._reference = self._reference * np.sqrt(np.prod(self._box[2:] / old_size))
         if self._centres:
             self._centres = deque(map_points(homography, np.array(self._centres)), maxlen=3)
+        if self._vanished_at is not None:
+            self._vanished_at = map_points(homography, self._vanished_at[None, :])[0]
         if self._sure_centres:
             frames = [f for f, _ in self._sure_centres]
             moved = map_points(homography, np.array([c for _, c in self._sure_centres]))
@@ -480,10 +487,30 @@ class ParticleTracker:
         state: FloatArray = w @ p
         return state[[X, Y, W, H]]
 
-    def _transition(self, similarity: float, weakest_part: float, follows_part: bool) -> None:
+    def _far_from_coast(self, candidate: FloatArray) -> bool:
+        """OCCLUDED, and `candidate` is further than `search_radius` box sizes (on either
+        axis) from every point of the coast's path: from where the target was last tracked
+        to the coasting box. (He may have stopped anywhere along it, or kept walking.)"""
+        if self._state is not TrackState.OCCLUDED:
+            return False
+        end = self._box[:2]
+        start = end if self._vanished_at is None else self._vanished_at
+        path = end - start
+        length2 = float(path @ path)
+        share = (
+            0.0 if length2 == 0 else float(np.clip((candidate[:2] - start) @ path / length2, 0, 1))
+        )
+        nearest = start + share * path
+        step = np.abs(candidate[:2] - nearest) / self._box[2:]
+        return bool(step.max() > self._config.occlusion.search_radius)
+
+    def _transition(
+        self, similarity: float, weakest_part: float, follows_part: bool, far: bool = False
+    ) -> None:
         """The state after a frame whose candidate scored `similarity` (the mean of its
         parts) and `weakest_part` (their minimum); `follows_part`: an occluded target's
-        visible part is in view (the count towards LOST waits)."""
+        visible part is in view (the count towards LOST waits); `far`: the candidate is
+        far from the coasting box (`_far_from_coast`)."""
         occ = self._config.occlusion
         if self._state is TrackState.LOST:
             self._lost_frames += 1
@@ -504,7 +531,10 @@ class ParticleTracker:
         whole = self._state is not TrackState.OCCLUDED or (
             weakest_part >= occ.part_threshold and self._moved_enough()
         )
-        if similarity >= self._back_threshold() and whole:
+        back = self._back_threshold()
+        if far:
+            back = max(back, occ.far_return_threshold)
+        if similarity >= back and whole:
             self._state = TrackState.TRACKING
             self._occluded_frames = 0
             return
