@@ -497,10 +497,8 @@ class ParticleTracker:
         start = end if self._vanished_at is None else self._vanished_at
         path = end - start
         length2 = float(path @ path)
-        share = (
-            0.0 if length2 == 0 else float(np.clip((candidate[:2] - start) @ path / length2, 0, 1))
-        )
-        nearest = start + share * path
+        along = 0.0 if length2 == 0 else float((candidate[:2] - start) @ path) / length2
+        nearest = start + min(max(along, 0.0), 1.0) * path
         step = np.abs(candidate[:2] - nearest) / self._box[2:]
         return bool(step.max() > self._config.occlusion.search_radius)
 
@@ -510,7 +508,7 @@ class ParticleTracker:
         """The state after a frame whose candidate scored `similarity` (the mean of its
         parts) and `weakest_part` (their minimum); `follows_part`: an occluded target's
         visible part is in view (the count towards LOST waits); `far`: the candidate is
-        far from the coasting box (`_far_from_coast`)."""
+        far from the coast's path (`_far_from_coast`)."""
         occ = self._config.occlusion
         if self._state is TrackState.LOST:
             self._lost_frames += 1
