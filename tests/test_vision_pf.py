@@ -360,17 +360,17 @@ class _EdgeLikelihood:
     def truth_x(self, t: int) -> float:
         return 100.0 + self.SPEED * t
 
+    def _near(self, boxes: np.ndarray, x: float, spread: float = 100.0) -> np.ndarray:
+        """1 for boxes centred at (x, Y), falling off as a Gaussian of the distance."""
+        d2 = (boxes[:, 0] - x) ** 2 + (boxes[:, 1] - self.Y) ** 2
+        return np.exp(-d2 / spread)
+
     def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         t = int(frame[0, 0, 0])
-
-        def near(x: float) -> np.ndarray:
-            d2 = (boxes[:, 0] - x) ** 2 + (boxes[:, 1] - self.Y) ** 2
-            return np.exp(-d2 / 100.0)
-
-        edge = 0.66 * near(self.EDGE_X)
+        edge = 0.66 * self._near(boxes, self.EDGE_X)
         if self.HIDE <= t < self.SHOW:
             return edge
-        return np.maximum(edge, 0.97 * near(self.truth_x(t)))
+        return np.maximum(edge, 0.97 * self._near(boxes, self.truth_x(t)))
 
     def init(self, frame, box):
         pass
@@ -437,8 +437,7 @@ class _LookAlikeLikelihood(_EdgeLikelihood):
 
     def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         t = int(frame[0, 0, 0])
-        d2 = (boxes[:, 0] - 110.0) ** 2 + (boxes[:, 1] - self.Y) ** 2
-        near = np.exp(-d2 / 100.0)
+        near = self._near(boxes, 110.0)
         if 20 <= t < 26:
             return np.full(len(boxes), 0.3)
         return (0.66 if 26 <= t < 70 else 0.95) * near
@@ -484,16 +483,11 @@ class _FarReturnLikelihood(_EdgeLikelihood):
 
     def _score(self, frame: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         t = int(frame[0, 0, 0])
-
-        def near(x: float) -> np.ndarray:
-            d2 = (boxes[:, 0] - x) ** 2 + (boxes[:, 1] - self.Y) ** 2
-            return np.exp(-d2 / 200.0)
-
         if t < 20:
-            return 0.95 * near(self.truth_x(t))
+            return 0.95 * self._near(boxes, self.truth_x(t), 200.0)
         if t < self.back_from:
             return np.full(len(boxes), 0.3)
-        return np.maximum(0.3, 0.7 * near(self.truth_x(19) + self.offset))
+        return np.maximum(0.3, 0.7 * self._near(boxes, self.truth_x(19) + self.offset, 200.0))
 
 
 def _far_return_states(

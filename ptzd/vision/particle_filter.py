@@ -503,7 +503,7 @@ class ParticleTracker:
         return bool(step.max() > self._config.occlusion.search_radius)
 
     def _transition(
-        self, similarity: float, weakest_part: float, follows_part: bool, far: bool = False
+        self, similarity: float, weakest_part: float, follows_part: bool, far: bool
     ) -> None:
         """The state after a frame whose candidate scored `similarity` (the mean of its
         parts) and `weakest_part` (their minimum); `follows_part`: an occluded target's
