@@ -93,12 +93,16 @@ def soak_selections(soak_dir: Path) -> list[Selection]:
     return out
 
 
-def walker_truth(truth: GroundTruth, walker: int, first: int) -> GroundTruth:
-    """`truth` with `walker`'s track starting at scene frame `first` (the others whole)."""
-    tracks = {
-        tid: ({f: b for f, b in frames.items() if f >= first} if tid == walker else frames)
-        for tid, frames in truth.tracks.items()
-    }
+def walker_truth(truth: GroundTruth, walker: int, first: int, late: int = 0) -> GroundTruth:
+    """`truth` with `walker`'s track starting at scene frame `first` (the others whole).
+
+    With `late` N > 0 it starts N frames later, with the box of frame `first`: a box that
+    reaches the tracker N frames after the picture it was drawn on, put on the newest
+    frame as it is (what the daemon did before it remembered frames to catch up from)."""
+    own = {f: b for f, b in truth.tracks[walker].items() if f >= first + late}
+    if late and first in truth.tracks[walker] and first + late in own:
+        own[first + late] = truth.tracks[walker][first]
+    tracks = {tid: (own if tid == walker else frames) for tid, frames in truth.tracks.items()}
     return GroundTruth(truth.size, truth.fps, tracks=tracks, visibility=truth.visibility)
 
 
@@ -152,10 +156,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="config overrides, per section over the soak's regime")  # fmt: skip
     parser.add_argument("--record", type=Path, help="keep each run's records under this dir")
     parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--late-frames", type=int, default=0, metavar="N",
+                        help="start each run N frames after the selection, on the box the "
+                        "operator drew N frames before (a box put on the newest frame as it "
+                        "is)")  # fmt: skip
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "soak_replay.json")
     args = parser.parse_args(argv)
     if not 1 <= args.jobs <= 64:
         parser.error(f"--jobs must be in [1, 64], got {args.jobs}")
+    if not 0 <= args.late_frames <= 100:
+        parser.error(f"--late-frames must be in [0, 100], got {args.late_frames}")
     selections = soak_selections(args.soak_dir)
     if args.frames:
         wanted = set(args.frames)
@@ -172,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
             path = Path(tmp) / f"{selection.walker}_{selection.video_frame}.json"
             if not path.exists():
                 save_ground_truth(
-                    walker_truth(truth, selection.walker, selection.video_frame), path
+                    walker_truth(truth, selection.walker, selection.video_frame, args.late_frames),
+                    path,
                 )
             runs.append((selection, str(path), seed, args))
         if args.jobs == 1:

@@ -51,6 +51,13 @@ def test_the_walker_s_truth_starts_at_the_selected_frame() -> None:
     assert cut.tracks == {1: {9: (3, 3, 2, 2)}, 2: {5: (0, 0, 1, 1)}}
 
 
+def test_a_late_box_starts_later_with_the_box_drawn_before() -> None:
+    walked = {5: (1, 1, 2, 2), 6: (2, 1, 2, 2), 7: (3, 1, 2, 2), 8: (4, 1, 2, 2)}
+    truth = GroundTruth((100, 80), 25.0, tracks={1: walked})
+    late = walker_truth(truth, 1, 5, late=2)
+    assert late.tracks == {1: {7: (1, 1, 2, 2), 8: (4, 1, 2, 2)}}
+
+
 def test_centring_is_counted_after_the_settling_frames() -> None:
     settling: list[dict[str, Any]] = [{"ex": 0.9, "ey": 0.0}] * 3
     after: list[dict[str, Any]] = [
