@@ -80,6 +80,13 @@ STATUS_INTERVAL_S = 5.0
 # 30 fps; and how near in time a remembered frame must be to the one the box was drawn on
 POSE_MEMORY = 300
 DRAWN_FRAME_MATCH_S = 0.25
+# the frames themselves, for the last `capture.select_history_s` (and at most this many): a
+# box drawn on one of them starts the tracker there, and it follows the target to the
+# newest frame. An operator's box reaches us 0.1-0.3 s after the picture he drew it on; a
+# walker has moved on by then, and a model learnt from the box put on the newest frame
+# holds the ground he left (the soak's walkers: replayed centred 0.995 -> 0.530 with the
+# box 4 frames late; docs/mqtt.md).
+HISTORY_MAX_FRAMES = 150
 
 
 class CommandLink(Protocol):
@@ -218,6 +225,7 @@ class Daemon:
         self._pending_box: BoxTuple | None = initial_box
         self._pending_drawn_at: float | None = None  # capture time of the box's frame
         self._poses: deque[tuple[float, Pose]] = deque(maxlen=POSE_MEMORY)
+        self._recent: deque[tuple[FrameItem, Pose]] = deque(maxlen=HISTORY_MAX_FRAMES)
         self._drop_target = False
         self._generation = 0  # bumped by select/release: older tracks are ignored
         self._manual = False  # a manual MQTT command is in force: control sends nothing
@@ -410,6 +418,7 @@ class Daemon:
                     return
                 pose = self._pose_at(frame)
                 self._poses.append((frame.capture_time, pose))
+                self._remember(frame, pose)
                 if self.detector is not None and self.acquirer is None:
                     self.acquirer = Acquirer(self.config.acquisition, frame.size)
                 if self._drop_target:
@@ -426,17 +435,25 @@ class Daemon:
                         self.detector.reset()
                         self.acquirer.reset(frame.capture_time)
                 if self._pending_box is not None:
-                    box = self._drawn_box_now(
-                        self._pending_box, self._pending_drawn_at, frame, pose
-                    )
-                    self._pending_box = None
                     generation = self._generation
                     tracker = own = own or self.tracker_factory()
-                    await self._blocking(tracker.init, frame.image, box)
+                    since = self._frames_since(self._pending_drawn_at, frame)
+                    result: TrackResult | None
+                    if since:  # drawn on a remembered frame: start there, catch up to now
+                        result = await self._blocking(
+                            self._catch_up, tracker, self._pending_box, since
+                        )
+                        box = result.box
+                    else:
+                        box = self._drawn_box_now(
+                            self._pending_box, self._pending_drawn_at, frame, pose
+                        )
+                        await self._blocking(tracker.init, frame.image, box)
+                        result = TrackResult(box, TrackState.TRACKING, 1.0, (0, 0))
+                    self._pending_box = None
                     decision: Decision | None = None
                     if self.acquirer is not None:
                         decision = self.acquirer.select(frame.capture_time, box)
-                    result: TrackResult | None = TrackResult(box, TrackState.TRACKING, 1.0, (0, 0))
                     self._publish(_track_item(result, frame, pose, (0.0, 0.0), box, generation,
                                               decision, self._kind_of(tracker)))  # fmt: skip
                     previous = (frame, pose)
@@ -478,6 +495,45 @@ class Daemon:
                 previous = (frame, pose)
         finally:
             self.tracks.close()
+
+    def _remember(self, frame: FrameItem, pose: Pose) -> None:
+        """Keep `frame` for a box drawn on it; forget those older than
+        `capture.select_history_s`, and all of another size."""
+        keep_s = self.config.capture.select_history_s
+        recent = self._recent
+        if recent and (keep_s == 0 or recent[-1][0].size != frame.size):
+            recent.clear()
+        if keep_s == 0:
+            return
+        recent.append((frame, pose))
+        while recent[0][0].capture_time < frame.capture_time - keep_s:
+            recent.popleft()
+
+    def _frames_since(
+        self, drawn_at: float | None, frame: FrameItem
+    ) -> list[tuple[FrameItem, Pose]]:
+        """The remembered frames from the one captured at `drawn_at` to `frame` (the
+        newest), if that one is remembered and older than `frame`; else none."""
+        if drawn_at is None or len(self._recent) < 2:
+            return []
+        times = [abs(item.capture_time - drawn_at) for item, _ in self._recent]
+        first = times.index(min(times))
+        if times[first] > DRAWN_FRAME_MATCH_S or self._recent[first][0] is frame:
+            return []
+        return list(self._recent)[first:]
+
+    def _catch_up(
+        self, tracker: Tracker, box: BoxTuple, frames: list[tuple[FrameItem, Pose]]
+    ) -> TrackResult:
+        """Start `tracker` on `box` in the first of `frames` and follow the target through
+        the rest: its result on the last."""
+        (first, before), *rest = frames
+        tracker.init(first.image, box)
+        result = TrackResult(box, TrackState.TRACKING, 1.0, (0.0, 0.0))
+        for frame, pose in rest:
+            result = self._track_step(tracker, frame, pose, before)
+            before = pose
+        return result
 
     def _kind_of(self, tracker: Tracker | None) -> str | None:
         return running_kind(tracker, self.config.tracker.kind)

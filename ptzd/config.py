@@ -50,6 +50,10 @@ class CaptureConfig(StrictModel):
     # how old a frame is when cv2 hands it over (exposure, encoding, network, the decoder's
     # buffer): the dome's pose for a frame is its pose this long before it arrived
     latency_s: float = Field(default=0.0, ge=0.0, le=2.0)
+    # the frames of the last this many seconds are kept: a select whose `ts` names one of
+    # them starts the tracker there and follows the target to the newest (docs/mqtt.md);
+    # 0: a late box is only moved by the dome's motion
+    select_history_s: float = Field(default=0.5, ge=0.0, le=5.0)
 
 
 class Config(StrictModel):

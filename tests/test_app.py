@@ -395,7 +395,8 @@ def test_the_acquirers_boxes_move_with_the_view() -> None:
 
 class PanningCamera:
     """Frames at 20 fps from a dome panning right at 1 deg a frame, its pose reported with
-    each; remembers (capture time, pose) of every frame it gave."""
+    each, of a target standing still in the world (in view at BOX at pan 0); remembers
+    (capture time, pose) of every frame it gave."""
 
     def __init__(self, clock: RealClock) -> None:
         self.clock = clock
@@ -406,7 +407,8 @@ class PanningCamera:
         while True:
             pose = Pose(float(index), 0.0, 60.0)
             self.given.append((self.clock.now(), pose))
-            yield FrameItem(scene(BOX[0]), self.given[-1][0], index, pose, time.perf_counter())
+            x = _x_after_pan(BOX[0] + BOX[2] / 2, pose.pan) - BOX[2] / 2
+            yield FrameItem(scene(x), self.given[-1][0], index, pose, time.perf_counter())
             index += 1
             await asyncio.sleep(0.05)
 
@@ -421,7 +423,9 @@ def _x_after_pan(x: float, pan: float) -> float:
 @pytest.mark.parametrize("drawn", ["unsaid", "ts", "too old"])
 async def test_a_box_drawn_on_an_older_frame_moves_with_the_camera(drawn: str) -> None:
     """`{"select": box, "ts": ...}`: the box of a frame 6 frames old, the dome having turned
-    6 deg since, lands where those pixels are now, not where they were."""
+    6 deg since, lands where those pixels are now, not where they were. (With the frame
+    remembered, the tracker starts there and follows the target to now, which stands still
+    in the world: where the camera's motion puts it.)"""
     from ptzd.mqtt.messages import SelectTarget
 
     clock = RealClock()
@@ -436,10 +440,12 @@ async def test_a_box_drawn_on_an_older_frame_moves_with_the_camera(drawn: str) -
             task = asyncio.create_task(daemon.run())
             await asyncio.sleep(0.6)
             drawn_time, drawn_pose = camera.given[-6]
+            drawn_x = _x_after_pan(BOX[0] + BOX[2] / 2, drawn_pose.pan) - BOX[2] / 2
+            box = (drawn_x, BOX[1], BOX[2], BOX[3])
             if drawn == "too old":
                 drawn_time -= 60.0  # before anything remembered: taken as it is
             ts = None if drawn == "unsaid" else time.time() - (clock.now() - drawn_time)
-            daemon.handle_command(SelectTarget(BOX, ts))
+            daemon.handle_command(SelectTarget(box, ts))
             await asyncio.sleep(0.3)
             daemon.request_stop()
             await asyncio.wait_for(task, 10)
@@ -449,9 +455,56 @@ async def test_a_box_drawn_on_an_older_frame_moves_with_the_camera(drawn: str) -
     turned = first.pose.pan - drawn_pose.pan
     assert turned >= 6.0
     if drawn == "ts":
-        expected = _x_after_pan(BOX[0] + BOX[2] / 2, turned)
-        assert x + w / 2 == pytest.approx(expected, abs=0.5)
-        assert BOX[0] - (x + w / 2 - BOX[2] / 2) > 25.0  # 6 deg at f = 277 px: 29 px left
-        assert y + h / 2 == pytest.approx(BOX[1] + BOX[3] / 2, abs=1.0)
+        expected = _x_after_pan(BOX[0] + BOX[2] / 2, first.pose.pan)
+        assert x + w / 2 == pytest.approx(expected, abs=2.0)
+        assert drawn_x - (x + w / 2 - BOX[2] / 2) > 20.0  # 6 deg here: 24-29 px left
+        assert y + h / 2 == pytest.approx(BOX[1] + BOX[3] / 2, abs=2.0)
     else:
-        assert first.acquired == BOX
+        assert first.acquired == box
+
+
+@pytest.mark.parametrize("history_s", [0.5, 0.0])
+async def test_a_box_drawn_on_an_older_frame_is_followed_to_the_walker_now(
+    history_s: float,
+) -> None:
+    """The dome stands; the operator's box reaches the daemon 6 frames after the picture it
+    was drawn on, and the target walks 3 px a frame: the tracker starts on the remembered
+    frame and follows him, so the box lands on him now, not 18 px behind him. (With
+    `capture.select_history_s` 0 no frame is kept: the box lands as drawn.)"""
+    from ptzd.mqtt.messages import SelectTarget
+
+    clock = RealClock()
+    log = ItemLog()
+    given: list[FrameItem] = []
+
+    class Remembered(MovingTarget):
+        async def frames(self) -> AsyncIterator[FrameItem]:
+            async for frame in super().frames():
+                given.append(frame)
+                yield frame
+
+    with pty_pair() as (_master, port):
+        cfg = validate_config(
+            {"serial": {"port": port}, "capture": {"select_history_s": history_s}}, environ={}
+        )
+        async with PelcoLink(cfg.serial, clock=clock) as link:
+            daemon = Daemon(cfg, source=Remembered(clock, speed=3.0), link=link, clock=clock,
+                            tracker_factory=lambda: make_tracker(cfg.tracker),
+                            observer=log)  # fmt: skip
+            task = asyncio.create_task(daemon.run())
+            await asyncio.sleep(0.6)
+            drawn = given[-7]  # 6 frames before the newest
+            drawn_x = BOX[0] + 3.0 * drawn.index
+            ts = time.time() - (clock.now() - drawn.capture_time)
+            daemon.handle_command(SelectTarget((drawn_x, BOX[1], BOX[2], BOX[3]), ts))
+            await asyncio.sleep(0.3)
+            daemon.request_stop()
+            await asyncio.wait_for(task, 10)
+    first = next(item for item in log.items if item.acquired is not None)
+    assert first.acquired is not None
+    x, y = first.acquired[:2]
+    now_x = BOX[0] + 3.0 * first.frame.index  # where he is in the frame the box landed on
+    assert now_x - drawn_x >= 18.0
+    assert x == pytest.approx(now_x if history_s else drawn_x, abs=3.0)
+    assert y == pytest.approx(BOX[1], abs=3.0)
+    assert first.published_state == "tracking"
