@@ -516,6 +516,9 @@ class Daemon:
         newest), if that one is remembered and older than `frame`; else none."""
         if drawn_at is None or len(self._recent) < 2:
             return []
+        oldest, second = self._recent[0][0].capture_time, self._recent[1][0].capture_time
+        if drawn_at < oldest - (second - oldest):
+            return []  # drawn before the frames kept: moved by the dome's motion instead
         times = [abs(item.capture_time - drawn_at) for item, _ in self._recent]
         first = times.index(min(times))
         if times[first] > DRAWN_FRAME_MATCH_S or self._recent[first][0] is frame:
