@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from bench.soak_replay import Selection, main, settled_centring, soak_selections, walker_truth
-from ptzd.sim.groundtruth import GroundTruth
+from ptzd.sim.groundtruth import Box, GroundTruth
 
 # walker 19 of synthetic:0 as a 1-hour soak's operator boxed him at scene frame 1009, with
 # the soak dome's pose then (its sim/camera.jsonl)
@@ -52,7 +52,7 @@ def test_the_walker_s_truth_starts_at_the_selected_frame() -> None:
 
 
 def test_a_late_box_starts_later_with_the_box_drawn_before() -> None:
-    walked = {5: (1, 1, 2, 2), 6: (2, 1, 2, 2), 7: (3, 1, 2, 2), 8: (4, 1, 2, 2)}
+    walked: dict[int, Box] = {5: (1, 1, 2, 2), 6: (2, 1, 2, 2), 7: (3, 1, 2, 2), 8: (4, 1, 2, 2)}
     truth = GroundTruth((100, 80), 25.0, tracks={1: walked})
     late = walker_truth(truth, 1, 5, late=2)
     assert late.tracks == {1: {7: (1, 1, 2, 2), 8: (4, 1, 2, 2)}}
